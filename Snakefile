@@ -1,0 +1,30 @@
+# topoloc: map-based geolocalization from motion.
+# The stages live in workflow/rules/*.smk; their logic in src/topoloc.
+from snakemake.utils import min_version
+
+min_version("9.0")
+
+
+configfile: "config/config.yaml"
+
+
+report: "workflow/report/workflow.rst"
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/download_osm.smk"
+include: "workflow/rules/build_graph.smk"
+
+
+rule all:
+    default_target: True
+    input:
+        all_outputs(),
+
+
+onsuccess:
+    finish_invocation(os.environ.get(INVOCATION_ENV), "FINISHED")
+
+
+onerror:
+    finish_invocation(os.environ.get(INVOCATION_ENV), "FAILED")

