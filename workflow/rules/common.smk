@@ -16,14 +16,15 @@ from topoloc.tracking import INVOCATION_ENV, finish_invocation, new_invocation_i
 def _fail(message):
     """Stop before any job with one line that names the key or file."""
     print(f"topoloc: {message}", file=sys.stderr)
-    raise WorkflowError(message)
+    sys.exit(1)
 
 
 try:
     validate(config, "../schemas/config.schema.yaml")
 except WorkflowError as err:
-    cause = next((arg for arg in err.args if hasattr(arg, "absolute_path")), None)
-    _fail(validation_message(cause) if cause is not None else str(err).splitlines()[0])
+    # snakemake.utils.validate raises from inside jsonschema's handler: the cause is the context.
+    cause = err.__context__
+    _fail(validation_message(cause) if hasattr(cause, "absolute_path") else str(err).splitlines()[0])
 
 REGION = config["region"]["name"]
 try:

@@ -1,0 +1,73 @@
+import json
+import multiprocessing
+
+import pytest
+
+from topoloc import tracking
+
+
+def test_flatten_params():
+    flat = tracking.flatten_params({"graph": {"classes": ["a", "b"], "spacing": 20, "crs": None, "on": True}})
+    assert flat == {"graph.classes": '["a", "b"]', "graph.spacing": "20", "graph.crs": "null", "graph.on": "true"}
+
+
+def _stage(args):
+    workdir, invocation, index = args
+    import os
+
+    os.chdir(workdir)
+    os.environ[tracking.INVOCATION_ENV] = invocation
+    with tracking.StageRun("exp", f"rule{index}", {"topoloc.wildcards.region": "r"}, {"k": index}) as run:
+        run.log_metrics({"m": index})
+    return run.run_id
+
+
+@pytest.fixture()
+def store(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    return tmp_path
+
+
+def test_parallel_stage_runs_share_one_parent(store):
+    """Four processes open runs at once on a fresh SQLite store: no lock errors, one parent."""
+    invocation = tracking.new_invocation_id()
+    with multiprocessing.get_context("spawn").Pool(4) as pool:
+        run_ids = pool.map(_stage, [(str(store), invocation, i) for i in range(4)])
+    from mlflow import MlflowClient
+
+    client = MlflowClient(tracking.tracking_uri())
+    experiment = client.get_experiment_by_name("exp")
+    assert experiment.artifact_location == (store / "results" / "mlartifacts").as_uri()
+    runs = client.search_runs([experiment.experiment_id])
+    parents = [r for r in runs if r.data.tags.get("topoloc.role") == "pipeline"]
+    children = [r for r in runs if "mlflow.parentRunId" in r.data.tags]
+    assert len(parents) == 1 and len(children) == 4
+    assert {r.info.run_id for r in children} == set(run_ids)
+    assert all(r.data.tags["mlflow.parentRunId"] == parents[0].info.run_id for r in children)
+    assert sorted(r.data.metrics["m"] for r in children) == [0, 1, 2, 3]
+    assert {r.data.tags["topoloc.rule"] for r in children} == {"rule0", "rule1", "rule2", "rule3"}
+
+    tracking.finish_invocation(invocation, "FINISHED")
+    assert client.get_run(parents[0].info.run_id).info.status == "FINISHED"
+    assert not list((store / "results" / ".tracking").glob("invocation-*"))
+
+
+def test_finishing_an_invocation_without_runs_creates_nothing(store):
+    tracking.finish_invocation("no-such-invocation", "FINISHED")
+    assert not (store / "results" / "mlflow.db").exists()
+
+
+def test_git_state_outside_a_repository(tmp_path):
+    assert tracking.git_state(tmp_path) == {"topoloc.git_commit": "unknown", "topoloc.git_dirty": "unknown"}
+
+
+def test_a_failing_stage_marks_its_run_failed(store):
+    with pytest.raises(RuntimeError):
+        with tracking.StageRun("exp", "boom", {}, {}) as run:
+            raise RuntimeError("stage failed")
+    from mlflow import MlflowClient
+
+    assert MlflowClient(tracking.tracking_uri()).get_run(run.run_id).info.status == "FAILED"
+    markers = list((store / "results" / ".tracking").glob("invocation-*.json"))
+    assert len(markers) == 1 and json.loads(markers[0].read_text())["run_id"]

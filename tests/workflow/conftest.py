@@ -1,0 +1,52 @@
+"""Run the Snakemake workflow in a scratch copy of the repository."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@dataclass
+class Workflow:
+    root: Path
+
+    def run(self, *args: str, check: bool = True) -> subprocess.CompletedProcess:
+        """``snakemake ARGS`` in the copy; raise with its output when it fails and ``check``."""
+        proc = subprocess.run([sys.executable, "-m", "snakemake", *args], cwd=self.root, capture_output=True, text=True)
+        if check and proc.returncode != 0:
+            raise AssertionError(f"snakemake {' '.join(args)} failed:\n{proc.stdout}\n{proc.stderr}")
+        return proc
+
+    def planned(self, *args: str) -> dict[str, int]:
+        """Jobs a dry run of ``snakemake ARGS`` would execute, per rule (``all`` left out)."""
+        out = self.run("-n", *args).stdout
+        if "Nothing to be done" in out:
+            return {}
+        table = out.split("Job stats:", 1)[1].split("total", 1)[0]
+        jobs = dict((rule, int(n)) for rule, n in re.findall(r"^(\w+)\s+(\d+)$", table, flags=re.M))
+        jobs.pop("all", None)
+        return jobs
+
+    def config(self, name: str, text: str) -> str:
+        """Write an extra config file and return its path relative to the copy."""
+        (self.root / name).write_text(text)
+        return name
+
+
+@pytest.fixture()
+def workflow(tmp_path) -> Workflow:
+    """A scratch copy of the workflow, config and library sources (for code digests)."""
+    root = tmp_path / "repo"
+    root.mkdir()
+    shutil.copy(REPO / "Snakefile", root)
+    for folder in ("workflow", "config", "src"):
+        shutil.copytree(REPO / folder, root / folder, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
+    return Workflow(root)

@@ -1,0 +1,93 @@
+"""End-to-end: the default pipeline, its caching, its MLflow runs and its errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+GRAPH_OUTPUTS = ["graph.graphml", "edges.csv", "nodes.csv", "virtual_segments.csv", "stats.json", "map.png"]
+
+
+def mlflow_runs(root):
+    from mlflow import MlflowClient
+
+    client = MlflowClient(f"sqlite:///{root / 'results' / 'mlflow.db'}")
+    experiment = client.get_experiment_by_name("topoloc")
+    return client, client.search_runs([experiment.experiment_id])
+
+
+def test_pipeline_caching_and_tracking(workflow):
+    root = workflow.root
+    workflow.run("all", "-j", "4")
+    graph_dir = root / "results" / "helsinki" / "graph"
+    assert all((graph_dir / name).is_file() for name in GRAPH_OUTPUTS)
+    stats = json.loads((graph_dir / "stats.json").read_text())
+    assert stats["edges"] > 300 and stats["virtual_nodes"] > stats["edges"]
+    for rule in ("download_osm", "build_graph"):
+        assert (root / "results" / "helsinki" / "logs" / f"{rule}.log").is_file()
+        assert (root / "results" / "helsinki" / "benchmarks" / f"{rule}.tsv").is_file()
+
+    client, runs = mlflow_runs(root)
+    parents = [r for r in runs if r.data.tags.get("topoloc.role") == "pipeline"]
+    children = {r.data.tags["topoloc.rule"]: r for r in runs if "mlflow.parentRunId" in r.data.tags}
+    assert len(parents) == 1 and parents[0].info.status == "FINISHED"
+    assert set(children) == {"download_osm", "build_graph"}
+    build = children["build_graph"]
+    assert build.data.tags["mlflow.parentRunId"] == parents[0].info.run_id
+    assert build.data.tags["topoloc.wildcards.region"] == "helsinki"
+    assert len(build.data.tags["topoloc.input_sha256.osm"]) == 64
+    assert build.data.tags["topoloc.git_commit"] and build.data.tags["topoloc.git_dirty"]
+    assert build.data.params["virtual_node_spacing_m"] == "20"
+    assert build.data.metrics["edges"] == stats["edges"]
+    artifacts = {a.path for a in client.list_artifacts(build.info.run_id)}
+    assert {"stats.json", "map.png", "logs"} <= artifacts
+
+    # A second call finds everything up to date and records nothing.
+    assert workflow.planned("all") == {}
+    workflow.run("all", "--cores", "2")
+    assert len(mlflow_runs(root)[1]) == len(runs)
+
+    # A config key reruns only the stages that use it.
+    spacing = workflow.config("spacing.yaml", "graph:\n  virtual_node_spacing_m: 25\n")
+    assert workflow.planned("all", "--configfile", spacing) == {"build_graph": 1}
+    classes = workflow.config("classes.yaml", "graph:\n  highway_classes: [primary, secondary, residential]\n")
+    assert workflow.planned("all", "--configfile", classes) == {"build_graph": 1}
+    retries = workflow.config("retries.yaml", "download:\n  retries: 5\n")
+    assert workflow.planned("all", "--configfile", retries) == {"download_osm": 1, "build_graph": 1}
+
+    # Editing a stage's library code reruns that stage (and what depends on it), not the others.
+    plot = root / "src" / "topoloc" / "graph" / "plot.py"
+    plot.write_text(plot.read_text() + "\n# edited\n")
+    assert workflow.planned("all") == {"build_graph": 1}
+    plot.write_text(plot.read_text().replace("\n# edited\n", ""))
+    assert workflow.planned("all") == {}
+
+    # -R reruns just the named stage.
+    assert workflow.planned("all", "-R", "build_graph") == {"build_graph": 1}
+
+
+def test_bad_inputs_fail_with_one_line_and_leave_nothing(workflow):
+    root = workflow.root
+    (root / "corrupt.osm").write_text('<?xml version="1.0"?>\n<osm version="0.6">\n <way id="1"')
+    corrupt = workflow.config("corrupt.yaml", "region:\n  name: broken\n  osm_file: corrupt.osm\n")
+    proc = workflow.run("all", "--cores", "1", "--configfile", corrupt, check=False)
+    assert proc.returncode != 0
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("topoloc: ")]
+    assert len(errors) == 1 and errors[0].startswith("topoloc: corrupt.osm: cannot read OSM data (XML parsing error")
+    assert errors[0].endswith("(region.osm_file)")
+    assert not (root / "results" / "broken" / "osm" / "region.osm").exists()
+
+    cases = {
+        "missing.yaml": ("region:\n  name: m\n  osm_file: nowhere.osm.pbf\n", "topoloc: nowhere.osm.pbf: OSM file not found (region.osm_file)"),
+        "unknown.yaml": ("graph:\n  spacing: 3\n", "topoloc: config: unknown key under 'graph': Additional properties are not allowed ('spacing' was unexpected)"),
+        "type.yaml": ("graph:\n  virtual_node_spacing_m: ten\n", "topoloc: config key 'graph.virtual_node_spacing_m': 'ten' is not of type 'number'"),
+        "class.yaml": ("graph:\n  highway_classes: [footway]\n", "topoloc: config key 'graph.highway_classes.0': 'footway' is not one of"),
+        "two.yaml": ("region:\n  name: t\n  place: Karlsruhe\n", "topoloc: region: set exactly one of region.osm_file, region.place, region.bbox (got ['osm_file', 'place'])"),
+    }
+    for name, (text, expected) in cases.items():
+        proc = workflow.run("-n", "--configfile", workflow.config(name, text), check=False)
+        assert proc.returncode == 1, name
+        assert [line for line in proc.stderr.splitlines() if line.startswith("topoloc:")][0].startswith(expected), proc.stderr
