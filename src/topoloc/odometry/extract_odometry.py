@@ -158,7 +158,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     with atomic_path(outputs["frames"]) as tmp:
         frames.to_csv(tmp, index=False, float_format="%.3f")
     write_json(outputs["stats"], stats)
-    metrics = {"frames": len(est), "length_m": stats["length_m"], "flagged_frames": stats["flagged_frames"],
+    metrics = {"frames": len(est), "length_m": stats["length_m"], "flagged_frames": stats["flagged_frames"], **extra,
                **{f"labels_{k}": v for k, v in stats["labels"].items()},
                **{k: v for k, v in (ev or {}).items() if np.isfinite(v)}}
     return {k: float(v) for k, v in metrics.items() if isinstance(v, int | float)}
