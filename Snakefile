@@ -14,6 +14,8 @@ report: "workflow/report/workflow.rst"
 include: "workflow/rules/common.smk"
 include: "workflow/rules/download_osm.smk"
 include: "workflow/rules/build_graph.smk"
+include: "workflow/rules/extract_odometry.smk"
+include: "workflow/rules/segment_trajectory.smk"
 
 
 rule all:

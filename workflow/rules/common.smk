@@ -64,4 +64,29 @@ def all_outputs():
     """Everything `snakemake all` builds for the configured region."""
     return [
         *expand(rules.build_graph.output, region=REGION),
+        *expand(rules.extract_odometry.output, region=REGION, drive=DRIVES),
+        *expand(rules.segment_trajectory.output, region=REGION, drive=DRIVES),
     ]
+
+
+# Odometry drives: {drive} ranges over odometry.drives (kitti_*) or sim00.. (simulated).
+from topoloc.odometry.extract_odometry import drive_names
+
+DRIVES = drive_names(config["odometry"])
+if not DRIVES:
+    _fail(f"odometry.drives: no drives configured for source {config['odometry']['source']}")
+
+wildcard_constraints:
+    drive=r"[A-Za-z0-9][A-Za-z0-9_.-]*",
+
+
+def odometry_inputs(wildcards):
+    """The road graph plus the drive's files (poses, ground truth, times, GPS, stereo sequence)."""
+    inputs = {"graph": rules.build_graph.output.graph.format(region=wildcards.region)}
+    drive = (config["odometry"].get("drives") or {}).get(wildcards.drive) or {}
+    for key in ("poses", "ground_truth", "times", "gps"):
+        if drive.get(key):
+            inputs[key] = drive[key]
+    if config["odometry"]["source"] == "kitti_stereo" and drive.get("sequence"):
+        inputs["calib"] = os.path.join(drive["sequence"], "calib.txt")
+    return inputs

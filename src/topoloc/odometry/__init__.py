@@ -1,0 +1,1 @@
+"""Odometry: KITTI poses, simulated drives, stereo VO, georeferencing, frame labels and turn segmentation."""

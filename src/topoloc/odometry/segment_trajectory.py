@@ -1,0 +1,144 @@
+"""Stage ``segment_trajectory``: turns and distances of an odometry track, as tokens with edge labels.
+
+The georeferenced odometry track (``frames.csv`` of ``extract_odometry``) is
+simplified with Douglas-Peucker (``segmentation.tolerance_m``); its corners cut
+the track into segments. Each segment's length is the odometry's path length
+between its corners, its start/end headings the direction of travel over
+``segmentation.heading_lookahead_m`` after its first / before its last corner
+(:func:`topoloc.encoding.polyline_end_headings`). The segments go through
+:func:`topoloc.encoding.encode_segments`, the same function as the training
+routes, so train and test tokens share one convention.
+
+Each token's ground-truth edge is the frame label at the token's place: for a
+virtual node, the frame ``k * spacing`` along its segment; for a turn, the
+frame ``turn_label_offset_m`` past the corner (the road taken after the turn).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from topoloc.encoding import encode_segments, polyline_end_headings
+from topoloc.errors import InputError
+from topoloc.geometry import straight_token
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.io import atomic_path, write_json
+from topoloc.odometry.plot import plot_segments
+
+log = logging.getLogger(__name__)
+
+
+def douglas_peucker(points: NDArray[np.float64], tolerance: float) -> NDArray[np.int64]:
+    """Indices of the points kept by Douglas-Peucker (always the first and last), iteratively."""
+    pts = np.asarray(points, float)
+    n = len(pts)
+    if n <= 2:
+        return np.arange(n)
+    keep = np.zeros(n, dtype=bool)
+    keep[0] = keep[-1] = True
+    stack = [(0, n - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j <= i + 1:
+            continue
+        a, b = pts[i], pts[j]
+        seg = pts[i + 1:j]
+        d = b - a
+        norm = np.hypot(*d)
+        if norm > 1e-12:
+            dist = np.abs(d[0] * (seg[:, 1] - a[1]) - d[1] * (seg[:, 0] - a[0])) / norm
+        else:
+            dist = np.hypot(seg[:, 0] - a[0], seg[:, 1] - a[1])
+        k = int(np.argmax(dist))
+        if dist[k] > tolerance:
+            m = i + 1 + k
+            keep[m] = True
+            stack.append((i, m))
+            stack.append((m, j))
+    return np.flatnonzero(keep)
+
+
+def segment_track(xy: NDArray[np.float64], tolerance_m: float, lookahead_m: float, min_step_m: float = 0.05) -> dict[str, NDArray]:
+    """DP corners (frame indices) and per-segment length and start/end headings of a track (n, 2)."""
+    xy = np.asarray(xy, float)
+    step = np.hypot(*np.diff(xy, axis=0).T)
+    cum = np.concatenate([[0.0], np.cumsum(step)])
+    # Standstill frames carry no direction: simplify the moving frames only, map back to frame indices.
+    moving = np.concatenate([[True], step > min_step_m])
+    moving[-1] = True
+    idx = np.flatnonzero(moving)
+    corners = idx[douglas_peucker(xy[idx], tolerance_m)]
+    lengths, h0, h1 = [], [], []
+    for a, b in zip(corners[:-1], corners[1:]):
+        piece = xy[a:b + 1][moving[a:b + 1]]
+        if len(piece) < 2:
+            piece = xy[[a, b]]
+        start, end = polyline_end_headings(piece, lookahead_m)
+        lengths.append(cum[b] - cum[a])
+        h0.append(start)
+        h1.append(end)
+    return {"corners": corners, "cum": cum, "lengths": np.asarray(lengths), "heading_start": np.asarray(h0),
+            "heading_end": np.asarray(h1)}
+
+
+def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
+    """Segment the drive in ``inputs['frames']`` and write tokens, segments, stats and the Fig. 9(a)-style figure."""
+    seg_conf, bins = conf["segmentation"], int(conf["angle_bins"])
+    if bins < 4:
+        raise InputError("encoding.angle_bins", f"must be at least 4, got {bins}")
+    graph = RoadGraph.load(inputs["graph"])
+    spacing = graph.virtual_node_spacing_m
+    try:
+        frames = pd.read_csv(inputs["frames"])
+        xy = frames[["x", "y"]].to_numpy(float)
+        edge = frames["edge_id"].to_numpy(np.int64)
+    except (KeyError, ValueError, pd.errors.ParserError) as err:
+        raise InputError(inputs["frames"], f"not a frames table of extract_odometry ({err})") from err
+    if len(xy) < 2:
+        raise InputError(inputs["frames"], "a drive needs at least two frames")
+    started = time.perf_counter()
+    seg = segment_track(xy, float(seg_conf["tolerance_m"]), float(seg_conf["heading_lookahead_m"]))
+    encoded = encode_segments(seg["lengths"], seg["heading_start"], seg["heading_end"], spacing, bins)
+    elapsed = time.perf_counter() - started
+    corners, cum = seg["corners"], seg["cum"]
+    # Place of every token along the track, in metres from the start, then its frame and edge.
+    straight = straight_token(bins)
+    place = np.empty(len(encoded.tokens))
+    kind = []
+    virtual_index = 0
+    for t, s in enumerate(encoded.segment):
+        start_m = cum[corners[s]]
+        if s > 0 and (t == 0 or encoded.segment[t - 1] != s):  # the first token of segments 1.. is the turn into it
+            place[t] = start_m + min(float(seg_conf["turn_label_offset_m"]), seg["lengths"][s] / 2.0)
+            kind.append("turn")
+            virtual_index = 0
+        else:
+            virtual_index = virtual_index + 1 if t > 0 and encoded.segment[t - 1] == s else 1
+            place[t] = start_m + virtual_index * spacing
+            kind.append("virtual")
+    frame_of = np.clip(np.searchsorted(cum, place), 0, len(xy) - 1)
+    tokens = pd.DataFrame({"index": np.arange(len(encoded.tokens)), "token": encoded.tokens, "segment": encoded.segment,
+                           "kind": kind, "frame": frame_of, "edge_id": edge[frame_of],
+                           "x": xy[frame_of, 0], "y": xy[frame_of, 1]})
+    segments = pd.DataFrame({"segment": np.arange(len(corners) - 1), "start_frame": corners[:-1], "end_frame": corners[1:],
+                             "length_m": seg["lengths"], "heading_start_deg": seg["heading_start"],
+                             "heading_end_deg": seg["heading_end"], "start_edge_id": edge[corners[:-1]]})
+    stats = {"frames": len(xy), "corners": len(corners), "segments": len(corners) - 1, "tokens": len(encoded.tokens),
+             "turn_tokens": int(sum(k == "turn" for k in kind)),
+             "non_straight_turns": int(sum(k == "turn" and tok != straight for k, tok in zip(kind, encoded.tokens))),
+             "distinct_edges": int(tokens.edge_id.nunique()), "segmentation_s": elapsed,
+             "tolerance_m": float(seg_conf["tolerance_m"]), "angle_bins": bins, "virtual_node_spacing_m": spacing}
+    log.info("%d frames -> %d segments, %d tokens in %.3f s", len(xy), stats["segments"], stats["tokens"], elapsed)
+    plot_segments(xy, corners, outputs["figure"],
+                  f"{conf.get('drive', '')}: {stats['segments']} segments (DP {seg_conf['tolerance_m']} m), {stats['tokens']} tokens")
+    for name, table in (("tokens", tokens), ("segments", segments)):
+        with atomic_path(outputs[name]) as tmp:
+            table.to_csv(tmp, index=False, float_format="%.3f")
+    write_json(outputs["stats"], stats)
+    return {k: float(v) for k, v in stats.items() if isinstance(v, int | float)}
