@@ -1,4 +1,5 @@
 import json
+import os
 import multiprocessing
 
 import pytest
@@ -69,5 +70,6 @@ def test_a_failing_stage_marks_its_run_failed(store):
     from mlflow import MlflowClient
 
     assert MlflowClient(tracking.tracking_uri()).get_run(run.run_id).info.status == "FAILED"
+    assert "MLFLOW_TRACKING_URI" not in os.environ  # the run does not leak its store to later code
     markers = list((store / "results" / ".tracking").glob("invocation-*.json"))
     assert len(markers) == 1 and json.loads(markers[0].read_text())["run_id"]

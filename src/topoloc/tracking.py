@@ -154,11 +154,14 @@ class StageRun:
         self.tags = dict(tags)
         self.params = flatten_params(params)
         self.run_id: str | None = None
+        self._saved_env: str | None = None
 
     def __enter__(self) -> StageRun:
         import mlflow
 
         client = _client()
+        # set_tracking_uri exports MLFLOW_TRACKING_URI; restore it on exit so it does not leak.
+        self._saved_env = os.environ.get("MLFLOW_TRACKING_URI")
         mlflow.set_tracking_uri(tracking_uri())
         experiment_id = _experiment_id(client, self.experiment)
         invocation = os.environ.get(INVOCATION_ENV) or new_invocation_id()
@@ -191,3 +194,8 @@ class StageRun:
         import mlflow
 
         mlflow.end_run(status="FINISHED" if exc_type is None else "FAILED")
+        if self._saved_env is None:
+            os.environ.pop("MLFLOW_TRACKING_URI", None)
+            mlflow.set_tracking_uri(None)
+        else:
+            os.environ["MLFLOW_TRACKING_URI"] = self._saved_env

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -20,7 +21,8 @@ class Workflow:
 
     def run(self, *args: str, check: bool = True) -> subprocess.CompletedProcess:
         """``snakemake ARGS`` in the copy; raise with its output when it fails and ``check``."""
-        proc = subprocess.run([sys.executable, "-m", "snakemake", *args], cwd=self.root, capture_output=True, text=True)
+        env = {k: v for k, v in os.environ.items() if k not in {"MLFLOW_TRACKING_URI", "TOPOLOC_INVOCATION_ID"}}
+        proc = subprocess.run([sys.executable, "-m", "snakemake", *args], cwd=self.root, capture_output=True, text=True, env=env)
         if check and proc.returncode != 0:
             raise AssertionError(f"snakemake {' '.join(args)} failed:\n{proc.stdout}\n{proc.stderr}")
         return proc

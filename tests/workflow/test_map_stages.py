@@ -21,6 +21,7 @@ def mlflow_runs(root):
 
 def test_pipeline_caching_and_tracking(workflow):
     root = workflow.root
+    jobs = workflow.planned("all")
     workflow.run("all", "-j", "4")
     graph_dir = root / "results" / "helsinki" / "graph"
     assert all((graph_dir / name).is_file() for name in GRAPH_OUTPUTS)
@@ -34,7 +35,9 @@ def test_pipeline_caching_and_tracking(workflow):
     parents = [r for r in runs if r.data.tags.get("topoloc.role") == "pipeline"]
     children = {r.data.tags["topoloc.rule"]: r for r in runs if "mlflow.parentRunId" in r.data.tags}
     assert len(parents) == 1 and parents[0].info.status == "FINISHED"
-    assert set(children) == {"download_osm", "build_graph"}
+    child_runs = [r for r in runs if "mlflow.parentRunId" in r.data.tags]
+    assert len(child_runs) == sum(jobs.values())  # one run per executed job
+    assert set(children) == set(jobs) >= {"download_osm", "build_graph"}
     build = children["build_graph"]
     assert build.data.tags["mlflow.parentRunId"] == parents[0].info.run_id
     assert build.data.tags["topoloc.wildcards.region"] == "helsinki"
@@ -50,23 +53,24 @@ def test_pipeline_caching_and_tracking(workflow):
     workflow.run("all", "--cores", "2")
     assert len(mlflow_runs(root)[1]) == len(runs)
 
-    # A config key reruns only the stages that use it.
+    # A config key reruns the stages that use it (and, through their outputs, what depends on them).
+    downstream = {rule: n for rule, n in jobs.items() if rule not in {"download_osm", "build_graph"}}
     spacing = workflow.config("spacing.yaml", "graph:\n  virtual_node_spacing_m: 25\n")
-    assert workflow.planned("all", "--configfile", spacing) == {"build_graph": 1}
+    assert workflow.planned("all", "--configfile", spacing) == {"build_graph": 1, **downstream}
     classes = workflow.config("classes.yaml", "graph:\n  highway_classes: [primary, secondary, residential]\n")
-    assert workflow.planned("all", "--configfile", classes) == {"build_graph": 1}
+    assert workflow.planned("all", "--configfile", classes) == {"build_graph": 1, **downstream}
     retries = workflow.config("retries.yaml", "download:\n  retries: 5\n")
-    assert workflow.planned("all", "--configfile", retries) == {"download_osm": 1, "build_graph": 1}
+    assert workflow.planned("all", "--configfile", retries) == jobs
 
-    # Editing a stage's library code reruns that stage (and what depends on it), not the others.
+    # Editing a stage's library code reruns that stage, not the ones before it.
     plot = root / "src" / "topoloc" / "graph" / "plot.py"
     plot.write_text(plot.read_text() + "\n# edited\n")
-    assert workflow.planned("all") == {"build_graph": 1}
+    assert workflow.planned("all") == {"build_graph": 1, **downstream}
     plot.write_text(plot.read_text().replace("\n# edited\n", ""))
     assert workflow.planned("all") == {}
 
-    # -R reruns just the named stage.
-    assert workflow.planned("all", "-R", "build_graph") == {"build_graph": 1}
+    # -R reruns the named stage (and what depends on it), not the ones before it.
+    assert workflow.planned("all", "-R", "build_graph") == {"build_graph": 1, **downstream}
 
 
 def test_bad_inputs_fail_with_one_line_and_leave_nothing(workflow):
