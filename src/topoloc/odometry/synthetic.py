@@ -67,9 +67,17 @@ def stereo_pair(pose: NDArray[np.float64]) -> tuple[NDArray[np.uint8], NDArray[n
     return render(pose), render(right)
 
 
-def known_path(n: int = 30, step: float = 1.0) -> NDArray[np.float64]:
-    """``n`` KITTI poses (n, 4, 4): forward at ``step`` m per frame, turning 1.5 deg per frame in frames 10..19."""
-    yaw = np.pi / 2 - np.radians(1.5) * np.clip(np.arange(n) - 10, 0, 10)
+def known_path(n: int = 30, step: float = 1.0, turn_back_at: int | None = None) -> NDArray[np.float64]:
+    """``n`` KITTI poses (n, 4, 4): forward at ``step`` m per frame, turning right 1.5 deg per frame in frames 10..19.
+
+    The 15 deg heading carries the car sideways, into the right wall (x = 7) after about 40 m; for longer
+    sequences, ``turn_back_at`` turns it back left by 15 deg in frames ``turn_back_at .. turn_back_at + 9``
+    (30 keeps it about 5 m right of the centre line, 2 m from the wall).
+    """
+    frames = np.arange(n)
+    yaw = np.pi / 2 - np.radians(1.5) * np.clip(frames - 10, 0, 10)
+    if turn_back_at is not None:
+        yaw += np.radians(1.5) * np.clip(frames - turn_back_at, 0, 10)
     xz = np.vstack([[0, 0], np.cumsum(step * np.column_stack([np.cos(yaw[1:]), np.sin(yaw[1:])]), axis=0)])
     return poses_from_planar(xz, yaw)
 
