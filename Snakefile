@@ -14,6 +14,7 @@ report: "workflow/report/workflow.rst"
 include: "workflow/rules/common.smk"
 include: "workflow/rules/download_osm.smk"
 include: "workflow/rules/build_graph.smk"
+include: "workflow/rules/trajectory.smk"
 
 
 rule all:

@@ -63,4 +63,5 @@ def all_outputs():
     """Everything `snakemake all` builds for the configured region."""
     return [
         *expand(rules.build_graph.output, region=REGION),
+        *expand(rules.evaluate_rnn.output, region=REGION),
     ]
