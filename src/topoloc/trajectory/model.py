@@ -34,6 +34,8 @@ class TrajectoryRNN(L.LightningModule):
         optimizer: str = "adam",
         lr: float = 3e-3,
         weight_decay: float = 0.0,
+        plateau_factor: float | None = None,
+        plateau_patience: int = 1,
     ) -> None:
         super().__init__()
         if cell not in CELLS:
@@ -71,11 +73,17 @@ class TrajectoryRNN(L.LightningModule):
     def validation_step(self, batch: Any, batch_idx: int) -> torch.Tensor:
         return self._step(batch, "val")
 
-    def configure_optimizers(self) -> torch.optim.Optimizer:
+    def configure_optimizers(self) -> Any:
         hp = self.hparams
         if hp.optimizer == "sgd":
-            return torch.optim.SGD(self.parameters(), lr=hp.lr, weight_decay=hp.weight_decay)
-        return torch.optim.Adam(self.parameters(), lr=hp.lr, weight_decay=hp.weight_decay)
+            optimizer = torch.optim.SGD(self.parameters(), lr=hp.lr, weight_decay=hp.weight_decay)
+        else:
+            optimizer = torch.optim.Adam(self.parameters(), lr=hp.lr, weight_decay=hp.weight_decay)
+        if not hp.get("plateau_factor"):
+            return optimizer
+        # multiply the learning rate by plateau_factor when the validation loss stops improving
+        scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(optimizer, factor=hp.plateau_factor, patience=hp.plateau_patience)
+        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "monitor": "val_loss", "interval": "epoch"}}
 
 
 class Sequences(Dataset):

@@ -65,6 +65,8 @@ def build_model(conf: dict[str, Any], num_edges: int) -> TrajectoryRNN:
         optimizer=train["optimizer"],
         lr=float(train["lr"]),
         weight_decay=float(train.get("weight_decay", 0.0)),
+        plateau_factor=train.get("lr_plateau_factor"),
+        plateau_patience=int(train.get("lr_plateau_patience", 1)),
     )
 
 
