@@ -1,3 +1,7 @@
+# Library code per stage (editing a module reruns exactly the stages that use it).
+TRAJECTORY_DATA_CODE = ["encoding.py", "trajectory/paths.py", "trajectory/dataset.py", "trajectory/generate_dataset.py"]
+
+
 rule generate_dataset:
     """DFS training trajectories (exactly dataset.path_nodes map nodes) as angle tokens and edge labels; Table I."""
     input:
@@ -14,7 +18,7 @@ rule generate_dataset:
         ),
     params:
         conf={"encoding": config["encoding"], "dataset": config["dataset"], "region": config["region"]["name"]},
-        code=code("encoding.py", "graph", "trajectory"),
+        code=code("encoding.py", "graph", *TRAJECTORY_DATA_CODE),
     log:
         "results/{region}/logs/generate_dataset.log",
     benchmark:
@@ -35,7 +39,7 @@ rule train_rnn:
         metrics="results/{region}/model/train_metrics.json",
     params:
         conf={"encoding": config["encoding"], "model": config["model"], "train": config["train"]},
-        code=code("encoding.py", "trajectory"),
+        code=code(*TRAJECTORY_DATA_CODE, "trajectory/model.py", "trajectory/train_rnn.py"),
     log:
         "results/{region}/logs/train_rnn.log",
     benchmark:
@@ -76,7 +80,7 @@ rule evaluate_rnn:
         ),
     params:
         conf={"evaluate": config["evaluate"], "region": config["region"]["name"]},
-        code=code("trajectory"),
+        code=code("trajectory/dataset.py", "trajectory/model.py", "trajectory/evaluate_rnn.py"),
     log:
         "results/{region}/logs/evaluate_rnn.log",
     benchmark:

@@ -69,14 +69,14 @@ def plot_loss(history: pd.DataFrame, path: str, title: str) -> None:
 def plot_accuracy(tables: dict[str, pd.DataFrame], path: str, title: str, min_fraction: float = 0.01) -> None:
     """Fig. 8b: accuracy against position; positions held by fewer than ``min_fraction`` of trajectories are cut."""
     fig, ax = plt.subplots(figsize=(8, 4))
-    cut = 0
+    shown = {}
     for name, table in tables.items():
         positions = table[table.position != "last"]
         total = table.loc[table.position == "last", "n"].iloc[0]
-        keep = positions[positions.n >= min_fraction * total]
-        cut = max(cut, len(keep))
+        shown[name] = (positions[positions.n >= min_fraction * total], total, table.loc[table.position == "last", "accuracy"].iloc[0])
+    cut = max(len(keep) for keep, _, _ in shown.values())
+    for name, (keep, total, last) in shown.items():
         line = ax.plot(np.arange(1, len(keep) + 1), keep.accuracy, ".-", label=f"{name} (N={total})")
-        last = table.loc[table.position == "last", "accuracy"].iloc[0]
         ax.plot([cut + 2], [last], "s", color=line[0].get_color())
     ticks = list(range(0, cut + 1, max(1, cut // 10)))
     ax.set_xticks([*ticks, cut + 2], [*map(str, ticks), "last"])
