@@ -65,7 +65,7 @@ def test_overfits_small_map_to_full_last_step_accuracy(small_dataset):
     for t, lab in zip(tokens, labels):
         last[tuple(t)].add(int(lab[-1]))
     assert all(len(v) == 1 for v in last.values()), "the small map must have no ambiguous trajectories"
-    conf = confs(max_epochs=150, batch_size=32, lr=0.02)
+    conf = confs(max_epochs=150, batch_size=8, lr=0.01, lr_plateau_factor=0.3, lr_plateau_patience=3)
     conf["model"] |= {"hidden_size": 128, "embedding_dim": 32}
     # validate on the training set itself: the checkpoint with the lowest training loss is kept
     model, history, metrics = fit(conf, str(tmp / "train.parquet"), str(tmp / "train.parquet"), graph.num_edges, str(tmp / "model.ckpt"))

@@ -22,7 +22,8 @@ def _fail(message):
 try:
     validate(config, "../schemas/config.schema.yaml")
 except WorkflowError as err:
-    cause = next((arg for arg in err.args if hasattr(arg, "absolute_path")), None)
+    # Snakemake formats its args to strings; the jsonschema error survives as the context.
+    cause = next((arg for arg in (*err.args, err.__context__) if hasattr(arg, "absolute_path")), None)
     _fail(validation_message(cause) if cause is not None else str(err).splitlines()[0])
 
 REGION = config["region"]["name"]
