@@ -16,6 +16,7 @@ include: "workflow/rules/download_osm.smk"
 include: "workflow/rules/build_graph.smk"
 include: "workflow/rules/extract_odometry.smk"
 include: "workflow/rules/segment_trajectory.smk"
+include: "workflow/rules/trajectory.smk"
 
 
 rule all:

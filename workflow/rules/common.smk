@@ -66,6 +66,7 @@ def all_outputs():
         *expand(rules.build_graph.output, region=REGION),
         *expand(rules.extract_odometry.output, region=REGION, drive=DRIVES),
         *expand(rules.segment_trajectory.output, region=REGION, drive=DRIVES),
+        *expand(rules.evaluate_rnn.output, region=REGION),
     ]
 
 

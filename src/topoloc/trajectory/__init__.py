@@ -1,0 +1,1 @@
+"""Trajectory learning: DFS training paths on the road graph, their token encoding, the RNN."""

@@ -1,0 +1,128 @@
+"""Paths -> token sequences and edge labels, streamed to Parquet.
+
+Each path ``n_0 -e_0-> n_1 -e_1-> ... n_k`` is encoded with
+:func:`topoloc.encoding.encode_segments` (the one convention shared with the
+odometry of test drives): straight tokens at the virtual nodes of ``e_0``, the
+turning-angle token at ``n_1``, the virtual nodes of ``e_1``, ... The label of a
+token is the id of the real edge the vehicle is on after that step (the edge
+"on which the last turn occurs"). Headings are taken from each road's polyline
+oriented in the direction of travel, over ``heading_lookahead_m`` at its ends.
+
+Rows are written to Parquet in row groups of ``shard_rows``: memory stays
+bounded whatever the number of paths, and the bytes depend only on the inputs
+and the seed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from topoloc.encoding import encode_segments, polyline_end_headings
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.trajectory.paths import Path as GraphPath
+
+SCHEMA = pa.schema(
+    [
+        ("path_id", pa.int64()),
+        ("copy", pa.int16()),  # 0: the clean path; 1..: noisy augmented copies
+        ("nodes", pa.list_(pa.int64())),
+        ("edges", pa.list_(pa.int32())),
+        ("tokens", pa.list_(pa.int16())),
+        ("labels", pa.list_(pa.int32())),
+    ]
+)
+
+
+@dataclass(frozen=True)
+class Noise:
+    """Augmentation: ``copies`` noisy versions of every training path."""
+
+    copies: int = 0
+    angle_std_deg: float = 0.0
+    spacing_rel_std: float = 0.0
+
+
+class PathEncoder:
+    """Encodes paths of one road graph; per-edge lengths and headings are computed once."""
+
+    def __init__(self, graph: RoadGraph, bins: int, heading_lookahead_m: float) -> None:
+        self.bins = bins
+        self.spacing = graph.virtual_node_spacing_m
+        self.lengths = graph.edges.length_m.to_numpy(dtype=float)
+        self.u = graph.edges.u.to_numpy()
+        # heading (start, end) of each edge travelled u->v; v->u is the reverse (+180, swapped).
+        self.forward = np.array([polyline_end_headings(g, heading_lookahead_m) for g in graph.geometry]).reshape(-1, 2)
+
+    def headings(self, path: GraphPath) -> tuple[np.ndarray, np.ndarray]:
+        """Travel headings at the start and end of each edge of ``path``, in degrees."""
+        edges = np.asarray(path.edges)
+        reverse = self.u[edges] != np.asarray(path.nodes[:-1])
+        start = np.where(reverse, self.forward[edges, 1] + 180.0, self.forward[edges, 0])
+        end = np.where(reverse, self.forward[edges, 0] + 180.0, self.forward[edges, 1])
+        return start, end
+
+    def encode(self, path: GraphPath, rng: np.random.Generator | None = None, noise: Noise = Noise()) -> tuple[np.ndarray, np.ndarray]:
+        """Tokens and edge-id labels of ``path``; with ``rng``, jittered by ``noise``."""
+        edges = np.asarray(path.edges)
+        lengths = self.lengths[edges]
+        start, end = self.headings(path)
+        if rng is not None:
+            start = start + rng.normal(0.0, noise.angle_std_deg, len(start)) if noise.angle_std_deg else start
+            if noise.spacing_rel_std:
+                lengths = lengths * np.clip(1.0 + rng.normal(0.0, noise.spacing_rel_std, len(lengths)), 0.1, None)
+        drive = encode_segments(lengths, start, end, self.spacing, self.bins)
+        return drive.tokens, edges[drive.segment]
+
+
+class ShardWriter:
+    """Appends rows to a Parquet file, one row group per ``shard_rows`` rows."""
+
+    def __init__(self, path: str | Path, shard_rows: int) -> None:
+        self.writer = pq.ParquetWriter(str(path), SCHEMA, compression="zstd")
+        self.shard_rows = shard_rows
+        self.rows: dict[str, list] = {name: [] for name in SCHEMA.names}
+        self.count = 0
+
+    def add(self, path_id: int, copy: int, path: GraphPath, tokens: np.ndarray, labels: np.ndarray) -> None:
+        for name, value in zip(SCHEMA.names, (path_id, copy, path.nodes, path.edges, tokens, labels)):
+            self.rows[name].append(value)
+        self.count += 1
+        if len(self.rows["path_id"]) >= self.shard_rows:
+            self.flush()
+
+    def flush(self) -> None:
+        if self.rows["path_id"]:
+            self.writer.write_table(pa.table(self.rows, schema=SCHEMA))
+            self.rows = {name: [] for name in SCHEMA.names}
+
+    def close(self) -> None:
+        self.flush()
+        self.writer.close()
+
+
+def iter_rows(path: str | Path, columns: Iterable[str] = ("tokens", "labels")) -> Iterator[dict]:
+    """Rows of a dataset file, one row group at a time."""
+    file = pq.ParquetFile(str(path))
+    for group in range(file.num_row_groups):
+        yield from file.read_row_group(group, columns=list(columns)).to_pylist()
+
+
+def load_sequences(path: str | Path, limit: int | None = None) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Tokens and labels of (the first ``limit``) rows of a dataset file, as numpy arrays."""
+    table = pq.read_table(str(path), columns=["tokens", "labels"])
+    if limit is not None:
+        table = table.slice(0, limit)
+    tokens = table.column("tokens").combine_chunks()
+    labels = table.column("labels").combine_chunks()
+    offsets = tokens.offsets.to_numpy()
+    offsets = offsets - offsets[0]
+    flat_t = tokens.flatten().to_numpy().astype(np.int64)
+    flat_l = labels.flatten().to_numpy().astype(np.int64)
+    return ([flat_t[a:b] for a, b in zip(offsets[:-1], offsets[1:])],
+            [flat_l[a:b] for a, b in zip(offsets[:-1], offsets[1:])])

@@ -1,0 +1,147 @@
+"""Stage ``evaluate_rnn``: accuracy at the i-th position (the paper's Eq. 6), Fig. 8a and Fig. 8b.
+
+``Accuracy(i)`` is the fraction of trajectories whose prediction at their
+i-th token (virtual nodes included) is the true edge, over the trajectories
+that have an i-th token (``n`` in the table); "last" is each trajectory's
+last token. Computed for the training and the held-out (validation)
+trajectories.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from topoloc.io import atomic_path, write_json, write_text  # noqa: E402
+from topoloc.trajectory.dataset import load_sequences  # noqa: E402
+from topoloc.trajectory.model import TrajectoryRNN, predict  # noqa: E402
+
+log = logging.getLogger(__name__)
+
+
+def accuracy_by_position(predictions: list[np.ndarray], labels: list[np.ndarray]) -> pd.DataFrame:
+    """Rows ``position`` (1-based, then ``last``), ``n`` trajectories with that position, ``accuracy``."""
+    if not labels:
+        return pd.DataFrame(columns=["position", "n", "accuracy"])
+    longest = max(len(lab) for lab in labels)
+    correct = np.zeros(longest)
+    count = np.zeros(longest)
+    for pred, lab in zip(predictions, labels):
+        hits = pred == lab
+        correct[: len(lab)] += hits
+        count[: len(lab)] += 1
+    last = float(np.mean([p[-1] == lab[-1] for p, lab in zip(predictions, labels)]))
+    rows = [{"position": str(i + 1), "n": int(count[i]), "accuracy": correct[i] / count[i]} for i in range(longest)]
+    rows.append({"position": "last", "n": len(labels), "accuracy": last})
+    return pd.DataFrame(rows)
+
+
+def plot_loss(history: pd.DataFrame, path: str, title: str) -> None:
+    """Fig. 8a: training loss (per logged step) and validation loss (per epoch) against epochs."""
+    fig, ax = plt.subplots(figsize=(6, 4))
+    steps_per_epoch = max(1.0, history.step.max() / max(1.0, history.epoch.max() + 1)) if len(history) else 1.0
+    train = history.dropna(subset=["train_loss"])
+    val = history.dropna(subset=["val_loss"])
+    ax.plot(train.step / steps_per_epoch, train.train_loss, lw=0.8, alpha=0.7, label="training loss (batch)")
+    if len(train) > 10:
+        ax.plot(train.step / steps_per_epoch, train.train_loss.rolling(max(3, len(train) // 30), min_periods=1).mean(), lw=1.5, label="training loss (smoothed)")
+    ax.plot(val.step / steps_per_epoch, val.val_loss, "o-", label="validation loss")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("cross-entropy (NLL)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120)
+    plt.close(fig)
+
+
+def plot_accuracy(tables: dict[str, pd.DataFrame], path: str, title: str, min_fraction: float = 0.01) -> None:
+    """Fig. 8b: accuracy against position; positions held by fewer than ``min_fraction`` of trajectories are cut."""
+    fig, ax = plt.subplots(figsize=(8, 4))
+    shown = {}
+    for name, table in tables.items():
+        positions = table[table.position != "last"]
+        total = table.loc[table.position == "last", "n"].iloc[0]
+        shown[name] = (positions[positions.n >= min_fraction * total], total, table.loc[table.position == "last", "accuracy"].iloc[0])
+    cut = max(len(keep) for keep, _, _ in shown.values())
+    for name, (keep, total, last) in shown.items():
+        line = ax.plot(np.arange(1, len(keep) + 1), keep.accuracy, ".-", label=f"{name} (N={total})")
+        ax.plot([cut + 2], [last], "s", color=line[0].get_color())
+    ticks = list(range(0, cut + 1, max(1, cut // 10)))
+    ax.set_xticks([*ticks, cut + 2], [*map(str, ticks), "last"])
+    ax.set_xlabel("i-th position in trajectory (virtual nodes included)")
+    ax.set_ylabel("accuracy (Eq. 6)")
+    ax.set_ylim(0, 1.02)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120)
+    plt.close(fig)
+
+
+def markdown_table(tables: dict[str, pd.DataFrame], region: str) -> str:
+    """Accuracy per position, one column pair per split."""
+    merged = None
+    for name, table in tables.items():
+        part = table.rename(columns={"n": f"n {name}", "accuracy": f"accuracy {name}"})
+        merged = part if merged is None else merged.merge(part, on="position", how="outer", sort=False)
+    merged = merged.sort_values("position", key=lambda s: s.map(lambda p: 10**9 if p == "last" else int(p)))
+    lines = [f"# Accuracy at the i-th position ({region})", "", "| " + " | ".join(merged.columns) + " |", "|" + "---|" * len(merged.columns)]
+    for _, row in merged.iterrows():
+        cells = []
+        for col in merged.columns:
+            value = row[col]
+            if col.startswith("accuracy"):
+                cells.append("" if pd.isna(value) else f"{value:.4f}")
+            elif col.startswith("n "):
+                cells.append("" if pd.isna(value) else str(int(value)))
+            else:
+                cells.append(f"**{value}**" if value == "last" else str(value))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
+    """Evaluate ``inputs['model']`` on ``train``/``val``; write ``table``, ``csv``, ``metrics``, ``loss_figure``, ``accuracy_figure``."""
+    region = conf.get("region", "")
+    model = TrajectoryRNN.load_from_checkpoint(inputs["model"], map_location="cpu")
+    limit = conf["evaluate"].get("max_train_trajectories")
+    tables = {}
+    for split, limit_split in (("train", limit), ("held-out", None)):
+        tokens, labels = load_sequences(inputs["train" if split == "train" else "val"], limit_split)
+        tables[split] = accuracy_by_position(predict(model, tokens), labels)
+    frame = pd.concat([t.assign(split=name) for name, t in tables.items()])[["split", "position", "n", "accuracy"]]
+    with atomic_path(outputs["csv"]) as tmp:
+        frame.to_csv(tmp, index=False)
+    write_text(outputs["table"], markdown_table(tables, region))
+    history = pd.read_csv(inputs["history"])
+    plot_loss(history, outputs["loss_figure"], f"Fig. 8a: loss ({region}, {model.hparams.cell.upper()})")
+    plot_accuracy(tables, outputs["accuracy_figure"], f"Fig. 8b: accuracy vs position ({region})")
+    metrics: dict[str, float] = {}
+    for split, table in tables.items():
+        key = split.replace("-", "")
+        last = table[table.position == "last"].iloc[0]
+        positions = table[table.position != "last"]
+        metrics[f"{key}_acc_last"] = float(last.accuracy)
+        metrics[f"{key}_trajectories"] = float(last.n)
+        for i in (1, 5, 10, 20, 40):
+            if i <= len(positions):
+                metrics[f"{key}_acc_pos{i}"] = float(positions.accuracy.iloc[i - 1])
+    training = json.loads(Path(inputs["train_metrics"]).read_text())
+    metrics["train_seconds"] = float(training.get("train_seconds", float("nan")))
+    write_json(outputs["metrics"], metrics)
+    log.info("evaluation: %s", metrics)
+    return metrics

@@ -1,0 +1,131 @@
+"""Stage ``generate_dataset``: DFS training trajectories of the road graph, as tokens and edge labels.
+
+Outputs ``train.parquet`` and ``val.parquet`` (split by whole paths, from the
+seed), ``stats.json`` and the paper's Table I as markdown.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+import numpy as np
+
+from topoloc.errors import InputError
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.io import atomic_path, write_json, write_text
+from topoloc.trajectory.dataset import Noise, PathEncoder, ShardWriter
+from topoloc.trajectory.paths import sample_paths
+
+log = logging.getLogger(__name__)
+
+
+def check_encoding(encoding: dict[str, Any]) -> int:
+    """The number of angle bins, checked (``encoding.angle_bins`` >= 4)."""
+    bins = encoding.get("angle_bins", 20)
+    if int(bins) != bins or bins < 4:
+        raise InputError("encoding.angle_bins", f"must be an integer >= 4, got {bins}")
+    return int(bins)
+
+
+def generate(graph: RoadGraph, conf: dict[str, Any], train_path: str, val_path: str) -> dict[str, Any]:
+    """Write the dataset of ``graph`` to the two Parquet files; return its statistics."""
+    data = conf["dataset"]
+    bins = check_encoding(conf["encoding"])
+    path_nodes = int(data["path_nodes"])
+    if path_nodes < 2:
+        raise InputError("dataset.path_nodes", f"must be at least 2, got {path_nodes}")
+    if path_nodes > len(graph.nodes):
+        raise InputError("dataset.path_nodes", f"{path_nodes} nodes per path, but the graph has only {len(graph.nodes)} nodes")
+    val_fraction = float(data["val_fraction"])
+    if not 0.0 <= val_fraction < 1.0:
+        raise InputError("dataset.val_fraction", f"must be in [0, 1), got {val_fraction}")
+    aug = data.get("augment", {})
+    noise = Noise(int(aug.get("copies", 0)), float(aug.get("angle_std_deg", 0.0)), float(aug.get("spacing_rel_std", 0.0)))
+    seed = int(data["seed"])
+    encoder = PathEncoder(graph, bins, float(conf["encoding"]["heading_lookahead_m"]))
+    split_rng = np.random.default_rng([seed, 1])
+    noise_rng = np.random.default_rng([seed, 2])
+
+    counts = {"train": 0, "val": 0}
+    train_classes = np.zeros(graph.num_edges, dtype=bool)
+    all_classes = np.zeros(graph.num_edges, dtype=bool)
+    lengths: list[int] = []
+    started = time.perf_counter()
+    with atomic_path(train_path) as train_tmp, atomic_path(val_path) as val_tmp:
+        writers = {"train": ShardWriter(train_tmp, int(data["shard_rows"])), "val": ShardWriter(val_tmp, int(data["shard_rows"]))}
+        paths = sample_paths(
+            graph,
+            path_nodes,
+            respect_oneway=bool(data["respect_oneway"]),
+            max_per_source=data.get("max_paths_per_source"),
+            max_total=data.get("max_paths_total"),
+            seed=seed,
+        )
+        for path_id, path in enumerate(paths):
+            split = "val" if split_rng.random() < val_fraction else "train"
+            tokens, labels = encoder.encode(path)
+            writers[split].add(path_id, 0, path, tokens, labels)
+            counts[split] += 1
+            lengths.append(len(tokens))
+            all_classes[labels] = True
+            if split == "train":
+                train_classes[labels] = True
+                for copy in range(1, noise.copies + 1):
+                    noisy_tokens, noisy_labels = encoder.encode(path, noise_rng, noise)
+                    writers[split].add(path_id, copy, path, noisy_tokens, noisy_labels)
+        for writer in writers.values():
+            writer.close()
+        elapsed = time.perf_counter() - started
+        paths_total = counts["train"] + counts["val"]
+        if paths_total == 0:
+            raise InputError("dataset.path_nodes", f"no simple path with {path_nodes} nodes in this graph (respect_oneway={data['respect_oneway']})")
+        if counts["train"] == 0 or (val_fraction > 0 and counts["val"] == 0):
+            raise InputError("dataset.val_fraction", f"split of {paths_total} paths leaves {counts['train']} train / {counts['val']} validation paths")
+    lengths_arr = np.asarray(lengths)
+    return {
+        "map_nodes": int(len(graph.nodes)),
+        "map_edges": int(graph.num_edges),
+        "path_nodes": path_nodes,
+        "trajectories": int(paths_total),
+        "train_trajectories": int(counts["train"]),
+        "val_trajectories": int(counts["val"]),
+        "augmented_train_rows": int(counts["train"] * noise.copies),
+        "classes": int(graph.num_edges),
+        "classes_seen": int(all_classes.sum()),
+        "train_classes_seen": int(train_classes.sum()),
+        "input_feature_space": bins,
+        "tokens_min": int(lengths_arr.min()),
+        "tokens_mean": float(lengths_arr.mean()),
+        "tokens_max": int(lengths_arr.max()),
+        "seconds": elapsed,
+        "trajectories_per_s": paths_total * (1 + noise.copies) / max(elapsed, 1e-9),
+    }
+
+
+def table_i(stats: dict[str, Any], region: str) -> str:
+    """The paper's Table I for this map, in markdown."""
+    rows = [
+        ("Topological Map", f"{stats['map_nodes']} nodes, {stats['map_edges']} edges"),
+        ("Trajectory Length", f"{stats['path_nodes']} nodes ({stats['tokens_min']}-{stats['tokens_max']} tokens, mean {stats['tokens_mean']:.1f})"),
+        ("All Trajectories", f"{stats['trajectories']}"),
+        ("All Classes", f"{stats['classes']}"),
+        ("Input Feature Space", f"{stats['input_feature_space']}"),
+        ("Training Trajectories", f"{stats['train_trajectories']}" + (f" (+{stats['augmented_train_rows']} noisy copies)" if stats["augmented_train_rows"] else "")),
+        ("Validation Trajectories", f"{stats['val_trajectories']}"),
+        ("Training Output Classes", f"{stats['train_classes_seen']}"),
+    ]
+    lines = [f"# Table I: dataset statistics ({region})", "", "| Data | Statistics |", "|---|---|"]
+    lines += [f"| {name} | {value} |" for name, value in rows]
+    return "\n".join(lines) + "\n"
+
+
+def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
+    """Generate the dataset; outputs ``train``, ``val``, ``stats``, ``table``."""
+    graph = RoadGraph.load(inputs["graph"])
+    stats = generate(graph, conf, outputs["train"], outputs["val"])
+    log.info("dataset: %s", stats)
+    write_json(outputs["stats"], stats)
+    write_text(outputs["table"], table_i(stats, conf.get("region", "")))
+    return {k: float(v) for k, v in stats.items()}

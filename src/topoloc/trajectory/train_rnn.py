@@ -1,0 +1,168 @@
+"""Stage ``train_rnn``: fit the trajectory RNN on the DFS dataset with Lightning.
+
+Logged to the stage's MLflow run through Lightning's MLFlowLogger bound to
+that run; the best checkpoint (lowest validation loss) is written to
+``model`` and logged as an MLflow PyTorch model with its signature.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import lightning as L
+import numpy as np
+import pandas as pd
+import torch
+
+from topoloc.errors import InputError
+from topoloc.io import atomic_path, write_json
+from topoloc.trajectory.generate_dataset import check_encoding
+from topoloc.trajectory.model import TrajectoryData, TrajectoryRNN
+
+log = logging.getLogger(__name__)
+
+
+class History(L.Callback):
+    """Training loss every ``every`` steps and validation metrics every epoch, for Fig. 8a."""
+
+    def __init__(self, every: int = 10) -> None:
+        self.every = every
+        self.rows: list[dict[str, float]] = []
+
+    def on_train_batch_end(self, trainer: L.Trainer, module: L.LightningModule, outputs: Any, batch: Any, batch_idx: int) -> None:
+        if trainer.global_step % self.every == 0 and outputs is not None:
+            loss = outputs["loss"] if isinstance(outputs, dict) else outputs
+            self.rows.append({"step": trainer.global_step, "epoch": trainer.current_epoch, "train_loss": float(loss)})
+
+    def on_validation_epoch_end(self, trainer: L.Trainer, module: L.LightningModule) -> None:
+        if trainer.sanity_checking:
+            return
+        metrics = trainer.callback_metrics
+        row = {"step": trainer.global_step, "epoch": trainer.current_epoch}
+        for key in ("val_loss", "val_acc", "val_acc_last"):
+            if key in metrics:
+                row[key] = float(metrics[key])
+        self.rows.append(row)
+
+
+def build_model(conf: dict[str, Any], num_edges: int) -> TrajectoryRNN:
+    """The network of ``conf['model']`` with the optimizer of ``conf['train']``."""
+    model, train = conf["model"], conf["train"]
+    if train["optimizer"] not in ("adam", "sgd"):
+        raise InputError("train.optimizer", f"must be adam or sgd, got {train['optimizer']!r}")
+    return TrajectoryRNN(
+        bins=check_encoding(conf["encoding"]),
+        num_edges=num_edges,
+        cell=model["cell"],
+        hidden_size=int(model["hidden_size"]),
+        embedding_dim=int(model["embedding_dim"]),
+        optimizer=train["optimizer"],
+        lr=float(train["lr"]),
+        weight_decay=float(train.get("weight_decay", 0.0)),
+        plateau_factor=train.get("lr_plateau_factor"),
+        plateau_patience=int(train.get("lr_plateau_patience", 1)),
+    )
+
+
+def fit(conf: dict[str, Any], train_path: str, val_path: str, num_edges: int, model_path: str,
+        logger: Any = None, fast_dev_run: bool = False) -> tuple[TrajectoryRNN, pd.DataFrame, dict[str, float]]:
+    """Train; write the best checkpoint to ``model_path``; return the model, the history and metrics."""
+    train = conf["train"]
+    L.seed_everything(int(train["seed"]), workers=True, verbose=False)
+    bins = check_encoding(conf["encoding"])
+    data = TrajectoryData(train_path, val_path, bins, int(train["batch_size"]), int(train["seed"]))
+    data.setup()
+    if len(data.train) == 0:
+        raise InputError(train_path, "empty training set (dataset stage produced no training paths)")
+    if len(data.val) == 0:
+        raise InputError(val_path, "empty validation set (set dataset.val_fraction > 0)")
+    model = build_model(conf, num_edges)
+    history = History(every=max(1, int(train["log_every_n_steps"])))
+    ckpt_dir = Path(tempfile.mkdtemp(prefix=".checkpoints-", dir=Path(model_path).parent))
+    checkpoint = L.pytorch.callbacks.ModelCheckpoint(dirpath=ckpt_dir, filename="best", monitor="val_loss", mode="min", save_top_k=1)
+    callbacks: list[L.Callback] = [history, checkpoint]
+    if train.get("early_stopping_patience") is not None:
+        callbacks.append(L.pytorch.callbacks.EarlyStopping(monitor="val_loss", mode="min", patience=int(train["early_stopping_patience"])))
+    max_time = train.get("max_time_min")
+    trainer = L.Trainer(
+        accelerator=train["accelerator"],
+        devices=1,
+        max_epochs=int(train["max_epochs"]),
+        max_time={"minutes": float(max_time)} if max_time is not None else None,
+        logger=logger if logger is not None else False,
+        callbacks=callbacks,
+        log_every_n_steps=int(train["log_every_n_steps"]),
+        gradient_clip_val=train.get("gradient_clip"),
+        enable_progress_bar=True,
+        enable_model_summary=False,
+        fast_dev_run=fast_dev_run,
+        deterministic=True,
+    )
+    started = time.perf_counter()
+    try:
+        trainer.fit(model, datamodule=data)
+        seconds = time.perf_counter() - started
+        best = checkpoint.best_model_path
+        with atomic_path(model_path) as tmp:
+            if best:
+                shutil.copyfile(best, tmp)
+                model = TrajectoryRNN.load_from_checkpoint(best, map_location="cpu")
+            else:  # fast_dev_run saves no checkpoint
+                trainer.save_checkpoint(tmp)
+    finally:
+        shutil.rmtree(ckpt_dir, ignore_errors=True)
+    frame = pd.DataFrame(history.rows, columns=["step", "epoch", "train_loss", "val_loss", "val_acc", "val_acc_last"])
+    val_rows = frame.dropna(subset=["val_loss"])
+    best_row = val_rows.loc[val_rows.val_loss.idxmin()] if len(val_rows) else None
+    metrics = {
+        "train_seconds": seconds,
+        "epochs": float(trainer.current_epoch),
+        "steps": float(trainer.global_step),
+        "train_size": float(len(data.train)),
+        "val_size": float(len(data.val)),
+        "parameters": float(sum(p.numel() for p in model.parameters())),
+    }
+    if best_row is not None:
+        metrics |= {"best_val_loss": float(best_row.val_loss), "best_val_acc_last": float(best_row.val_acc_last),
+                    "best_epoch": float(best_row.epoch)}
+    return model, frame, metrics
+
+
+def log_mlflow_model(model: TrajectoryRNN) -> None:
+    """Log ``model`` to the active MLflow run as a PyTorch model with an input/output signature."""
+    import mlflow
+    from mlflow.models import infer_signature
+
+    model = model.to("cpu").eval()
+    bins = model.hparams.bins
+    example = np.array([[bins // 2] * 6, [bins // 2, bins // 2, 3, bins // 2, bins // 2, bins // 2]], dtype=np.int64)
+    with torch.no_grad():
+        logits = model(torch.as_tensor(example)).numpy()
+    signature = infer_signature(example, logits)
+    mlflow.pytorch.log_model(model, name="model", signature=signature, input_example=example)
+
+
+def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
+    """Train on ``inputs`` train/val/stats; write ``model``, ``history`` and ``metrics``."""
+    import mlflow
+    from lightning.pytorch.loggers import MLFlowLogger
+
+    from topoloc.tracking import tracking_uri
+
+    stats = json.loads(Path(inputs["stats"]).read_text())
+    active = mlflow.active_run()
+    logger = MLFlowLogger(tracking_uri=tracking_uri(), run_id=active.info.run_id) if active else None
+    model, history, metrics = fit(conf, inputs["train"], inputs["val"], int(stats["classes"]), outputs["model"], logger)
+    with atomic_path(outputs["history"]) as tmp:
+        history.to_csv(tmp, index=False)
+    write_json(outputs["metrics"], metrics)
+    log.info("trained: %s", metrics)
+    if active and conf["train"].get("log_model", True):
+        log_mlflow_model(model)
+    return metrics
