@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import yaml
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -51,4 +52,11 @@ def workflow(tmp_path) -> Workflow:
     shutil.copy(REPO / "Snakefile", root)
     for folder in ("workflow", "config", "src"):
         shutil.copytree(REPO / folder, root / folder, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
+    # The pipeline's mechanics are under test here, not accuracy: small data and training budgets.
+    config_path = root / "config" / "config.yaml"
+    config = yaml.safe_load(config_path.read_text())
+    config["odometry"]["simulated"]["drives"] = 1
+    config["dataset"]["max_paths_total"] = 2000
+    config["train"].update(max_epochs=2, max_time_min=0.5)
+    config_path.write_text(yaml.safe_dump(config, sort_keys=False))
     return Workflow(root)
