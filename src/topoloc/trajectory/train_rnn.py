@@ -137,14 +137,19 @@ def fit(conf: dict[str, Any], train_path: str, val_path: str, num_edges: int, mo
 def log_mlflow_model(model: TrajectoryRNN) -> None:
     """Log ``model`` to the active MLflow run as a PyTorch model with an input/output signature."""
     import mlflow
-    from mlflow.models import infer_signature
+    from mlflow.models import ModelSignature
+    from mlflow.types import Schema, TensorSpec
 
     model = model.to("cpu").eval()
     bins = model.hparams.bins
     example = np.array([[bins // 2] * 6, [bins // 2, bins // 2, 3, bins // 2, bins // 2, bins // 2]], dtype=np.int64)
     with torch.no_grad():
         logits = model(torch.as_tensor(example)).numpy()
-    signature = infer_signature(example, logits)
+    # batch and sequence length are free: (-1, -1) int64 tokens -> (-1, -1, num_edges) float32 logits
+    signature = ModelSignature(
+        inputs=Schema([TensorSpec(np.dtype(np.int64), (-1, -1))]),
+        outputs=Schema([TensorSpec(np.dtype(np.float32), (-1, -1, logits.shape[-1]))]),
+    )
     mlflow.pytorch.log_model(model, name="model", signature=signature, input_example=example)
 
 
