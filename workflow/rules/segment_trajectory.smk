@@ -16,7 +16,7 @@ rule segment_trajectory:
     params:
         conf=lambda wildcards: {
             "segmentation": config["segmentation"],
-            "angle_bins": config["encoding"]["angle_bins"],
+            "encoding": config["encoding"],
             "drive": wildcards.drive,
         },
         code=code("odometry", "encoding.py"),

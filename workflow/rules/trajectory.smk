@@ -18,7 +18,7 @@ rule generate_dataset:
         ),
     params:
         conf={"encoding": config["encoding"], "dataset": config["dataset"], "region": config["region"]["name"]},
-        code=code("encoding.py", "graph", *TRAJECTORY_DATA_CODE),
+        code=code("graph", *TRAJECTORY_DATA_CODE),
     log:
         "results/{region}/logs/generate_dataset.log",
     benchmark:

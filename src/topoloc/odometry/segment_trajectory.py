@@ -4,7 +4,7 @@ The georeferenced odometry track (``frames.csv`` of ``extract_odometry``) is
 simplified with Douglas-Peucker (``segmentation.tolerance_m``); its corners cut
 the track into segments. Each segment's length is the odometry's path length
 between its corners, its start/end headings the direction of travel over
-``segmentation.heading_lookahead_m`` after its first / before its last corner
+``encoding.heading_lookahead_m`` (shared with the training paths) after its first / before its last corner
 (:func:`topoloc.encoding.polyline_end_headings`). The segments go through
 :func:`topoloc.encoding.encode_segments`, the same function as the training
 routes, so train and test tokens share one convention.
@@ -89,7 +89,7 @@ def segment_track(xy: NDArray[np.float64], tolerance_m: float, lookahead_m: floa
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
     """Segment the drive in ``inputs['frames']`` and write tokens, segments, stats and the Fig. 9(a)-style figure."""
-    seg_conf, bins = conf["segmentation"], int(conf["angle_bins"])
+    seg_conf, bins = conf["segmentation"], int(conf["encoding"]["angle_bins"])
     if bins < 4:
         raise InputError("encoding.angle_bins", f"must be at least 4, got {bins}")
     graph = RoadGraph.load(inputs["graph"])
@@ -103,7 +103,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     if len(xy) < 2:
         raise InputError(inputs["frames"], "a drive needs at least two frames")
     started = time.perf_counter()
-    seg = segment_track(xy, float(seg_conf["tolerance_m"]), float(seg_conf["heading_lookahead_m"]))
+    seg = segment_track(xy, float(seg_conf["tolerance_m"]), float(conf["encoding"]["heading_lookahead_m"]))
     encoded = encode_segments(seg["lengths"], seg["heading_start"], seg["heading_end"], spacing, bins)
     elapsed = time.perf_counter() - started
     corners, cum = seg["corners"], seg["cum"]
