@@ -145,7 +145,8 @@ def test_buildings_and_procedural_facades(town):
     conf = {"default_height_m": [9.0, 24.0], "level_height_m": 3.2, "clearance_m": 2.5, "procedural": True,
             "procedural_gap_m": 15.0, "view_distance_m": 100.0}
     real = read_buildings(town["osm"], graph.crs, conf, seed=0)
-    assert len(real) > 30 and all(b.source == "osm" for b in real)
+    assert len(real) == len({b.key for b in real}) > 30  # one per footprint (way), no duplicates
+    assert all(b.source == "osm" for b in real)
     heights = np.array([b.height for b in real])
     assert np.all((heights >= 9.0) & (heights <= 24.0) | np.isclose(np.mod(heights - 1.0, 3.2), 0.0)
                   | (heights >= 10.0) & (heights <= 20.0))

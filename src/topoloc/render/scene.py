@@ -72,18 +72,19 @@ def parse_height(tags: dict[str, str], level_height_m: float) -> float | None:
     return None
 
 
-def _buildings_from(objects: Any, to_map: pyproj.Transformer, conf: dict[str, Any], seed: int) -> list[Building]:
-    """Buildings of pyosmium areas (or closed ways: ``rings`` of their node list) tagged ``building``."""
+def _buildings_from(objects: Any, to_map: pyproj.Transformer, conf: dict[str, Any], seed: int,
+                    closed_ways: bool = False) -> list[Building]:
+    """Buildings of the pyosmium areas (``closed_ways``: of the closed ways instead) tagged ``building``."""
     lo, hi = conf["default_height_m"]
     out: list[Building] = []
     for obj in objects:
         if obj.tags.get("building") in SKIPPED_BUILDINGS:
             continue
-        if obj.is_area():
+        if obj.is_area() and not closed_ways:
             rings = [([(n.lon, n.lat) for n in outer if n.location.valid()],
                       [[(n.lon, n.lat) for n in inner if n.location.valid()] for inner in obj.inner_rings(outer)])
                      for outer in obj.outer_rings()]
-        elif obj.is_way() and obj.is_closed():
+        elif closed_ways and obj.is_way() and obj.is_closed():
             rings = [([(n.lon, n.lat) for n in obj.nodes if n.location.valid()], [])]
         else:
             continue
@@ -121,7 +122,7 @@ def read_buildings(path: str | Path, crs: str, conf: dict[str, Any], seed: int) 
                 raise
             log.warning("%s: objects not sorted by id (%s); reading buildings from closed ways only", path, err)
             processor = osmium.FileProcessor(str(path), osmium.osm.NODE | osmium.osm.WAY).with_locations().with_filter(building)
-            return _buildings_from(processor, to_map, conf, seed)
+            return _buildings_from(processor, to_map, conf, seed, closed_ways=True)
     except RuntimeError as err:
         raise InputError(path, f"cannot read OSM data ({err})") from err
 
