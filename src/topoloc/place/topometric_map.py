@@ -1,0 +1,163 @@
+"""The topometric map of a teach drive (Cai & Wan, Sec. 3.4) and the ``build_topometric_map`` stage.
+
+One vertex per teach frame holds
+
+* the **image embedding** of the siamese network's backbone (and the raw-correlation descriptor of the
+  baseline);
+* the **position** from path integration of the teach drive's noisy odometry
+  (:mod:`topoloc.place.odometry`), and its arc length ``s`` along the vertex chain (the metric coordinate
+  the localization integrates in);
+* the **navigation command** (the paper's discrete local move): ``left``, ``right`` or ``straight`` when
+  the next intersection of the route (a graph node of degree 3 or more where the route changes road) is
+  within ``command.distance_m`` ahead, else ``follow`` (the lane). The turn is read from the road graph:
+  the turning angle (:func:`topoloc.geometry.turning_angle`: 180 straight, 90 left, 270 right) between
+  the points ``command.lookahead_m`` back along the entry road and forward along the exit road; within
+  ``command.straight_deg`` of 180 it is ``straight``.
+
+The ground-truth position of each vertex is kept for evaluation only. The stage is
+:mod:`topoloc.place.build_topometric_map`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from topoloc.errors import InputError
+from topoloc.geometry import point_along, turning_angle
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.io import atomic_path
+from topoloc.place.images import PlaceSet
+from topoloc.place.odometry import noisy_odometry
+
+COMMANDS = ("follow", "left", "right", "straight")
+
+
+@dataclass
+class TopometricMap:
+    """Vertices of a teach drive; see the module docstring. ``command`` holds indices into :data:`COMMANDS`."""
+
+    embedding: NDArray[np.float32]
+    descriptor: NDArray[np.float32]
+    xy: NDArray[np.float64]
+    command: NDArray[np.int64]
+    gt_xy: NDArray[np.float64]
+    condition: str
+
+    @property
+    def s(self) -> NDArray[np.float64]:
+        """Arc length of each vertex along the path-integrated chain."""
+        return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(self.xy, axis=0).T))])
+
+    def __len__(self) -> int:
+        return len(self.xy)
+
+    def save(self, path: str | Path) -> None:
+        """Write as ``.npz``, atomically."""
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as handle:
+                np.savez(handle, embedding=self.embedding, descriptor=self.descriptor, xy=self.xy, command=self.command,
+                         gt_xy=self.gt_xy, condition=np.array(self.condition))
+
+    @classmethod
+    def load(cls, path: str | Path) -> TopometricMap:
+        """Read a map written by :meth:`save`; InputError naming the file otherwise."""
+        try:
+            with np.load(path) as data:
+                return cls(data["embedding"], data["descriptor"], data["xy"], data["command"].astype(np.int64),
+                           data["gt_xy"], str(data["condition"]))
+        except (OSError, KeyError, ValueError) as err:
+            raise InputError(path, f"not a topometric map ({err})") from err
+
+
+@dataclass(frozen=True)
+class Intersection:
+    """A route's passage through an intersection: first frame on the exit road, node, command, turning angle."""
+
+    frame: int
+    node: int
+    command: str
+    angle_deg: float
+
+
+def _shared_node(graph: RoadGraph, e1: int, e2: int, xy: NDArray[np.float64]) -> int:
+    """The node where the route passes from edge ``e1`` to ``e2`` (the common end nearest to ``xy``)."""
+    ends1 = {int(graph.edges.u.iat[e1]), int(graph.edges.v.iat[e1])}
+    ends2 = {int(graph.edges.u.iat[e2]), int(graph.edges.v.iat[e2])}
+    candidates = sorted(ends1 & ends2) or sorted(ends1 | ends2)
+    pos = graph.nodes.loc[candidates, ["x", "y"]].to_numpy(float)
+    return candidates[int(np.argmin(np.hypot(*(pos - xy).T)))]
+
+
+def classify_turn(angle_deg: float, straight_deg: float) -> str:
+    """``straight`` within ``straight_deg`` of 180 degrees, else ``left`` (below) or ``right`` (above)."""
+    if abs(angle_deg - 180.0) <= straight_deg:
+        return "straight"
+    return "left" if angle_deg < 180.0 else "right"
+
+
+def route_intersections(graph: RoadGraph, edge: NDArray[np.int64], xy: NDArray[np.float64], lookahead_m: float,
+                        straight_deg: float) -> list[Intersection]:
+    """Intersections a drive passes, from its per-frame road edges ``edge`` and positions ``xy``."""
+    out = []
+    for k in np.flatnonzero(np.diff(edge) != 0) + 1:
+        e1, e2 = int(edge[k - 1]), int(edge[k])
+        if e1 < 0 or e2 < 0:
+            continue
+        node = _shared_node(graph, e1, e2, xy[k])
+        if int(graph.nodes.degree.at[node]) < 3:
+            continue  # a bend or a change of one-way direction, not an intersection
+        centre = graph.nodes.loc[node, ["x", "y"]].to_numpy(float)
+        entry = graph.edge_coords(e1, graph.other_end(e1, node))  # ends at node
+        leave = graph.edge_coords(e2, node)  # starts at node
+        before = point_along(entry[::-1], lookahead_m)
+        after = point_along(leave, lookahead_m)
+        angle = float(turning_angle(before, centre, after))
+        out.append(Intersection(int(k), node, classify_turn(angle, straight_deg), angle))
+    return out
+
+
+def vertex_commands(xy: NDArray[np.float64], intersections: list[Intersection], distance_m: float) -> NDArray[np.int64]:
+    """Command index per frame: that of the next intersection when it is within ``distance_m`` ahead, else follow."""
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+    command = np.zeros(len(xy), np.int64)
+    previous = 0
+    for item in intersections:
+        ahead = np.arange(previous, item.frame)
+        near = ahead[cum[item.frame] - cum[ahead] <= distance_m]
+        command[near] = COMMANDS.index(item.command)
+        previous = item.frame
+    return command
+
+
+def build_map(teach: PlaceSet, graph: RoadGraph, model: Any, conf: dict[str, Any]) -> tuple[TopometricMap, list[Intersection], dict[str, float]]:
+    """The map of the teach set's single condition; ``conf`` is the ``place`` config slice."""
+    from topoloc.place.localize import correlation_descriptors
+
+    if len(teach.conditions) != 1:
+        raise InputError("place.teach_condition", f"the teach set must hold one condition, got {teach.conditions}")
+    if np.any(teach.edge < 0):
+        raise InputError("teach", "the teach set lacks the road edge of some frames")
+    images = teach.images[0]
+    started = time.perf_counter()
+    embedding = model.embed(images)
+    embed_s = time.perf_counter() - started
+    descriptor = correlation_descriptors(images, tuple(conf["localize"]["correlation_size"]))
+    rng = np.random.default_rng([int(conf["seed"]), 23])
+    odometry = noisy_odometry(teach.xy, teach.yaw, conf["odometry_noise"], rng)
+    cmd = conf["command"]
+    crossings = route_intersections(graph, teach.edge, teach.xy, float(cmd["lookahead_m"]), float(cmd["straight_deg"]))
+    command = vertex_commands(teach.xy, crossings, float(cmd["distance_m"]))
+    topo = TopometricMap(embedding.astype(np.float32), descriptor, odometry.xy, command, teach.xy, teach.conditions[0])
+    drift = np.hypot(*(odometry.xy - teach.xy).T)
+    facts = {"vertices": float(len(topo)), "length_m": float(topo.s[-1]),
+             "true_length_m": float(np.hypot(*np.diff(teach.xy, axis=0).T).sum()),
+             "scale_error": odometry.scale_error, "drift_end_m": float(drift[-1]), "drift_max_m": float(drift.max()),
+             "intersections": float(len(crossings)), "embed_s": embed_s, "embed_images_per_s": len(images) / max(embed_s, 1e-9),
+             **{f"vertices_{name}": float(np.sum(command == i)) for i, name in enumerate(COMMANDS)}}
+    return topo, crossings, facts
