@@ -18,6 +18,7 @@ include: "workflow/rules/render_drive.smk"
 include: "workflow/rules/extract_odometry.smk"
 include: "workflow/rules/segment_trajectory.smk"
 include: "workflow/rules/trajectory.smk"
+include: "workflow/rules/place.smk"
 
 
 rule all:

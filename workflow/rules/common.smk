@@ -67,6 +67,9 @@ def all_outputs():
         *expand(rules.extract_odometry.output, region=REGION, drive=DRIVES),
         *expand(rules.segment_trajectory.output, region=REGION, drive=DRIVES),
         *expand(rules.evaluate_rnn.output, region=REGION),
+        *expand(rules.localize_repeat.output, region=REGION),
+        *expand(rules.build_topometric_map.output, region=REGION),
+        *expand(rules.render_places.output, region=REGION, split=["train", "teach", "repeat"]),
     ]
 
 

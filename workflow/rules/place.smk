@@ -1,0 +1,141 @@
+# Place recognition under appearance change and topometric teach-and-repeat localization (Cai & Wan).
+# Library code per stage (editing a module reruns exactly the stages that use it).
+PLACE_IMAGE_CODE = ["render", "graph/road_graph.py", "odometry/simulate.py", "odometry/poses.py", "odometry/georef.py",
+                    "place/images.py", "place/render_places.py"]
+PLACE_MODEL_CODE = ["place/render_places.py", "place/images.py", "place/network.py", "place/train_retrieval.py"]
+PLACE_MAP_CODE = ["place/odometry.py", "place/localize.py", "place/topometric_map.py", "place/build_topometric_map.py",
+                  "place/plot.py"]
+
+
+def place_conf(split):
+    """The config slice one split of render_places uses (other place keys do not rerun it)."""
+    place = config["place"]
+    keys = {"train": ["route", "seed", "image", "train"], "teach": ["route", "image", "teach_condition"],
+            "repeat": ["route", "seed", "image", "repeat", "repeat_conditions"]}[split]
+    sliced = {k: place[k] for k in keys}
+    if split == "train":  # which routes are for validation, and the training settings, do not change the images
+        sliced["train"] = {k: place["train"][k] for k in ("routes", "route_length_m", "min_distance_m", "min_frames")}
+    render = {k: v for k, v in config["render"].items() if k not in ("routes", "conditions", "sheet", "width", "height")}
+    return {"split": split, "render": render, "place": sliced}
+
+
+rule render_places:
+    """Place images at the network's input size: training routes (every condition), the teach drive, the repeat drives."""
+    input:
+        osm=rules.download_osm.output.osm,
+        graph=rules.build_graph.output.graph,
+    output:
+        places="results/{region}/places/{split}/places.npz",
+        stats="results/{region}/places/{split}/stats.json",
+        sheet=report(
+            "results/{region}/places/{split}/sheet.png",
+            caption="../report/place_sheet.rst",
+            category="Place recognition",
+            labels={"region": "{region}", "split": "{split}", "figure": "sample places"},
+        ),
+    wildcard_constraints:
+        split="train|teach|repeat",
+    params:
+        conf=lambda wildcards: place_conf(wildcards.split),
+        code=code(*PLACE_IMAGE_CODE),
+    log:
+        "results/{region}/logs/render_places_{split}.log",
+    benchmark:
+        "results/{region}/benchmarks/render_places_{split}.tsv"
+    script:
+        "../scripts/render_places.py"
+
+
+rule train_retrieval:
+    """Train the siamese place-recognition network (Lightning); the model is logged to MLflow with its signature."""
+    input:
+        places="results/{region}/places/train/places.npz",
+    output:
+        model="results/{region}/retrieval/model.ckpt",
+        history="results/{region}/retrieval/history.csv",
+        metrics="results/{region}/retrieval/train_metrics.json",
+        figure=report(
+            "results/{region}/retrieval/training.png",
+            caption="../report/retrieval_training.rst",
+            category="Place recognition",
+            labels={"region": "{region}", "figure": "training"},
+        ),
+    params:
+        conf={k: config["place"][k] for k in ("teach_condition", "threads", "pairs", "network", "train")}
+        | {"localize": {"window": config["place"]["localize"]["window"]}},
+        code=code(*PLACE_MODEL_CODE, "place/pairs.py", "place/plot.py"),
+    log:
+        "results/{region}/logs/train_retrieval.log",
+    benchmark:
+        "results/{region}/benchmarks/train_retrieval.tsv"
+    script:
+        "../scripts/train_retrieval.py"
+
+
+rule build_topometric_map:
+    """One vertex per teach frame: embedding, path-integrated position, navigation command."""
+    input:
+        model=rules.train_retrieval.output.model,
+        teach="results/{region}/places/teach/places.npz",
+        graph=rules.build_graph.output.graph,
+    output:
+        map="results/{region}/topometric_map/map.npz",
+        vertices="results/{region}/topometric_map/vertices.csv",
+        stats="results/{region}/topometric_map/stats.json",
+        figure=report(
+            "results/{region}/topometric_map/map.png",
+            caption="../report/topometric_map.rst",
+            category="Place recognition",
+            labels={"region": "{region}", "figure": "topometric map"},
+        ),
+    params:
+        conf={k: config["place"][k] for k in ("seed", "threads", "teach_condition", "odometry_noise", "command")}
+        | {"localize": {"correlation_size": config["place"]["localize"]["correlation_size"]}},
+        code=code(*PLACE_MODEL_CODE, *PLACE_MAP_CODE, "graph/road_graph.py"),
+    log:
+        "results/{region}/logs/build_topometric_map.log",
+    benchmark:
+        "results/{region}/benchmarks/build_topometric_map.tsv"
+    script:
+        "../scripts/build_topometric_map.py"
+
+
+rule localize_repeat:
+    """Repeat drives under every other condition localized on the map: network vs raw correlation; Tables 1/2-style."""
+    input:
+        model=rules.train_retrieval.output.model,
+        map=rules.build_topometric_map.output.map,
+        repeat="results/{region}/places/repeat/places.npz",
+    output:
+        frames="results/{region}/localization/frames.csv",
+        summary="results/{region}/localization/summary.csv",
+        metrics="results/{region}/localization/metrics.json",
+        table=report(
+            "results/{region}/localization/tables.md",
+            caption="../report/localization_table.rst",
+            category="Place recognition",
+            labels={"region": "{region}", "figure": "per-condition tables"},
+        ),
+        bars=report(
+            "results/{region}/localization/conditions.png",
+            caption="../report/localization_bars.rst",
+            category="Place recognition",
+            labels={"region": "{region}", "figure": "localized per condition"},
+        ),
+        errors=report(
+            "results/{region}/localization/errors.png",
+            caption="../report/localization_errors.rst",
+            category="Place recognition",
+            labels={"region": "{region}", "figure": "error along the route"},
+        ),
+    params:
+        conf={k: config["place"][k] for k in ("seed", "threads", "teach_condition", "repeat_conditions",
+                                               "odometry_noise", "localize")}
+        | {"train": {"conditions": config["place"]["train"]["conditions"]}},
+        code=code(*PLACE_MODEL_CODE, *PLACE_MAP_CODE, "place/localize_repeat.py"),
+    log:
+        "results/{region}/logs/localize_repeat.log",
+    benchmark:
+        "results/{region}/benchmarks/localize_repeat.tsv"
+    script:
+        "../scripts/localize_repeat.py"
