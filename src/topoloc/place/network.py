@@ -70,11 +70,12 @@ NORMALIZERS = {"image": standardize, "local": local_normalize}
 
 
 class Backbone(nn.Module):
-    """Standardised image ``(N, C, H, W)`` -> embedding ``(N, embedding_dim)``."""
+    """Image ``(N, C, H, W)`` (0..255) -> embedding ``(N, embedding_dim)`` of L2 norm ``scale``."""
 
     def __init__(self, in_channels: int = 3, channels: Sequence[int] = (16, 32, 64, 128), embedding_dim: int = 128,
-                 pool: Sequence[int] = (1, 4), normalize: str = "local") -> None:
+                 pool: Sequence[int] = (1, 4), normalize: str = "local", scale: float = 4.0) -> None:
         super().__init__()
+        self.scale = float(scale)
         if normalize not in NORMALIZERS:
             raise ValueError(f"normalize must be one of {sorted(NORMALIZERS)}, got {normalize!r}")
         self.normalize = NORMALIZERS[normalize]
@@ -87,7 +88,7 @@ class Backbone(nn.Module):
 
     def forward(self, images: torch.Tensor) -> torch.Tensor:
         x = self.stages(self.stem(self.normalize(images)))
-        return self.fc(torch.flatten(self.pool(x), 1))
+        return self.scale * F.normalize(self.fc(torch.flatten(self.pool(x), 1)), dim=1)
 
 
 def augment(images: torch.Tensor, generator: torch.Generator | None = None, shift_px: int = 4) -> torch.Tensor:
@@ -110,16 +111,38 @@ def augment(images: torch.Tensor, generator: torch.Generator | None = None, shif
     return x.clamp(0.0, 1.0) * 255.0
 
 
+def metric_init(head: nn.Sequential, dim: int, alpha: float = 1.0, beta: float = 4.0) -> None:
+    """Start the head as an L1 distance: hidden units ``relu(e1 - e2)`` and ``relu(e2 - e1)``, same-place logit
+    ``beta - alpha |e1 - e2|_1`` (the other units and logit start at zero); training then reshapes all of it."""
+    first, last = head[0], head[-1]
+    if first.out_features < 2 * dim:
+        raise ValueError(f"a metric head needs at least {2 * dim} hidden units, got {first.out_features}")
+    eye = torch.eye(dim)
+    with torch.no_grad():
+        first.weight.zero_()
+        first.bias.zero_()
+        first.weight[:dim] = torch.cat([eye, -eye], dim=1)
+        first.weight[dim:2 * dim] = torch.cat([-eye, eye], dim=1)
+        last.weight.zero_()
+        last.weight[1, :2 * dim] = -alpha
+        last.bias.copy_(torch.tensor([0.0, beta]))
+
+
 class SiameseNet(L.LightningModule):
     """Shared backbone, concatenated embeddings, FC -> ReLU -> FC -> softmax over (different, same)."""
 
     def __init__(self, in_channels: int = 3, channels: Sequence[int] = (16, 32, 64, 128), embedding_dim: int = 128,
-                 pool: Sequence[int] = (1, 4), hidden: int = 256, normalize: str = "local", lr: float = 1e-4,
-                 lr_decay: float = 0.95, weight_decay: float = 0.0, augment: bool = True, seed: int = 0) -> None:
+                 pool: Sequence[int] = (1, 4), hidden: int = 256, normalize: str = "local", embedding_scale: float = 4.0,
+                 head_init: str = "metric", lr: float = 1e-4, lr_decay: float = 0.95, weight_decay: float = 0.0,
+                 augment: bool = True, seed: int = 0) -> None:
         super().__init__()
         self.save_hyperparameters()
-        self.backbone = Backbone(in_channels, list(channels), embedding_dim, list(pool), normalize)
+        self.backbone = Backbone(in_channels, list(channels), embedding_dim, list(pool), normalize, embedding_scale)
         self.head = nn.Sequential(nn.Linear(2 * embedding_dim, hidden), nn.ReLU(inplace=True), nn.Linear(hidden, 2))
+        if head_init == "metric":
+            metric_init(self.head, embedding_dim)
+        elif head_init != "random":
+            raise ValueError(f"head_init must be metric or random, got {head_init!r}")
         self._generator: torch.Generator | None = None
 
     # -- inference ---------------------------------------------------------------------------------------

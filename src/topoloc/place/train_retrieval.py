@@ -137,8 +137,12 @@ class _Fixed(Dataset):
 def build_model(conf: dict[str, Any], in_channels: int, names: list[str]) -> SiameseNet:
     """The network of ``conf['network']`` with the optimizer settings of ``conf['train']``; local ``weights`` loaded."""
     net, train = conf["network"], conf["train"]
+    if net["head_init"] == "metric" and int(net["hidden"]) < 2 * int(net["embedding_dim"]):
+        raise InputError("place.network.hidden", f"a metric head needs at least 2 x embedding_dim = "
+                         f"{2 * int(net['embedding_dim'])} hidden units, got {net['hidden']}")
     model = SiameseNet(in_channels=in_channels, channels=list(net["channels"]), embedding_dim=int(net["embedding_dim"]),
                        pool=list(net["pool"]), hidden=int(net["hidden"]), normalize=str(net["normalize"]),
+                       embedding_scale=float(net["embedding_scale"]), head_init=str(net["head_init"]),
                        lr=float(train["lr"]), lr_decay=float(train["lr_decay"]), weight_decay=float(train["weight_decay"]),
                        augment=bool(train["augment"]), seed=int(train["seed"]))
     model.condition_names = list(names)
