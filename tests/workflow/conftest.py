@@ -59,5 +59,10 @@ def workflow(tmp_path) -> Workflow:
     config["render"].update(length_m=120, sheet={"conditions": ["clear_noon", "night"], "frames": 2})
     config["dataset"]["max_paths_total"] = 2000
     config["train"].update(max_epochs=2, max_time_min=0.5)
+    place = config["place"]
+    place["image"].update(width=64, height=48)
+    place["train"].update(routes=3, val_routes=1, route_length_m=120, min_distance_m=30, min_frames=20, batch_size=8,
+                          batches_per_epoch=4, max_epochs=1, max_time_min=0.5, val_pairs=16)
+    place["network"].update(channels=[8, 16], embedding_dim=16, hidden=32)
     config_path.write_text(yaml.safe_dump(config, sort_keys=False))
     return Workflow(root)

@@ -48,6 +48,18 @@ def test_pipeline_caching_and_tracking(workflow):
     artifacts = {a.path for a in client.list_artifacts(build.info.run_id)}
     assert {"stats.json", "map.png", "logs"} <= artifacts
 
+    # Place recognition: per-condition tables, metrics per condition, the network logged as an MLflow model.
+    loc = root / "results" / "helsinki" / "localization"
+    assert "| method | Mean | overcast | sunset | rain | fog (held out) | night |" in (loc / "tables.md").read_text()
+    assert {"network_within_5m_fog", "correlation_within_5m_night", "embed_images_per_s"} <= set(
+        children["localize_repeat"].data.metrics)
+    assert "val_acc_fog" in children["train_retrieval"].data.metrics
+    import mlflow
+
+    mlflow.set_tracking_uri(f"sqlite:///{root / 'results' / 'mlflow.db'}")
+    models = mlflow.search_logged_models(experiment_ids=[children["train_retrieval"].info.experiment_id], output_format="list")
+    assert any(m.source_run_id == children["train_retrieval"].info.run_id for m in models)
+
     # A second call finds everything up to date and records nothing.
     assert workflow.planned("all") == {}
     workflow.run("all", "--cores", "2")

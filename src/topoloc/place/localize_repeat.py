@@ -142,6 +142,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
                                        ((tab.method.iat[0], tab) for tab in tables[-3:])})
     frames = pd.concat(tables, ignore_index=True)
     summary = summarize(frames)
+    summary.insert(1, "held_out", summary.condition.isin(names["held_out"]))
     facts = {"repeat_frames": float(len(repeat)), "vertices": float(len(topo)),
              "embed_images_per_s": embedded / max(embed_s, 1e-9)}
     with atomic_path(outputs["frames"]) as tmp:

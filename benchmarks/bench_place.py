@@ -1,0 +1,93 @@
+"""Benchmark of place recognition: embedding speed and the teach-and-repeat localization targets.
+
+Usage (after ``snakemake all`` built ``results/<region>/localization``)::
+
+    PYTHONPATH=src python benchmarks/bench_place.py [--region helsinki] [--repeats 5] [--threads 1 2]
+
+Prints markdown:
+
+- the localization table of ``results/<region>/localization/summary.csv`` (share of repeat frames within
+  5 m and 2 m, relocalizations, per condition and method) against the targets: at least 90 % within 5 m
+  in every condition, ahead of the raw-correlation baseline;
+- embedding speed of the trained network (``results/<region>/retrieval/model.ckpt``) on the repeat images
+  at the network's input size, batches of 256, for each ``--threads`` torch thread count: images per
+  wall-clock second (median of ``--repeats``) and per CPU second; target >= 200 images/s. The load average
+  is printed beside it: on a shared machine the wall-clock figure depends on the other jobs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+
+from topoloc.place.images import PlaceSet
+from topoloc.place.train_retrieval import load_model
+
+
+def embedding_speed(model_path: Path, places_path: Path, threads: int, repeats: int, n: int = 1024) -> dict[str, float]:
+    """Images/s of ``model.embed`` on ``n`` repeat images with ``threads`` torch threads."""
+    torch.set_num_threads(threads)
+    model = load_model(model_path)
+    images = PlaceSet.load(places_path).images.reshape(-1, *PlaceSet.load(places_path).images.shape[2:])[:n]
+    model.embed(images[:256])  # warm-up
+    wall, cpu = [], []
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        model.embed(images, batch_size=256)
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return {"threads": threads, "images": len(images), "size": "x".join(map(str, images.shape[1:3][::-1])),
+            "images_per_s": len(images) / statistics.median(wall), "images_per_cpu_s": len(images) / statistics.median(cpu)}
+
+
+def localization_table(summary: pd.DataFrame, held_out: list[str]) -> str:
+    """Per condition and method: within 5 m, within 2 m, relocalizations; the mean; the target check."""
+    conditions = list(dict.fromkeys(summary.condition))
+    head = ["method", "Mean", *[f"{c} (held out)" if c in held_out else c for c in conditions], "min", ">= 90 % everywhere"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for method in dict.fromkeys(summary.method):
+        rows = summary[summary.method == method].set_index("condition").loc[conditions]
+        cells = [f"{a:.3f} / {b:.3f} / {int(r)}" for a, b, r in zip(rows.within_5m, rows.within_2m, rows.relocalizations)]
+        lines.append("| " + " | ".join([method, f"{rows.within_5m.mean():.3f}", *cells, f"{rows.within_5m.min():.3f}",
+                                        "yes" if rows.within_5m.min() >= 0.9 else "**no**"]) + " |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--region", default="helsinki")
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    args = parser.parse_args()
+    root = Path("results") / args.region
+    summary = pd.read_csv(root / "localization" / "summary.csv")
+    metrics = json.loads((root / "localization" / "metrics.json").read_text())
+    train = json.loads((root / "retrieval" / "train_metrics.json").read_text())
+    stats = json.loads((root / "places" / "train" / "stats.json").read_text())
+    held_out = sorted(set(summary.condition[summary.held_out]))
+    print(f"## Localization ({args.region}): within 5 m / within 2 m / relocalizations\n")
+    print(localization_table(summary, held_out))
+    net = summary[summary.method == "siamese network"].set_index("condition").within_5m
+    corr = summary[summary.method == "raw correlation"].set_index("condition").within_5m
+    ahead = bool((net > corr).all())
+    print(f"\nnetwork ahead of raw correlation in every condition: {'yes' if ahead else '**no**'}; "
+          f"training: {train['steps']:.0f} steps in {train['train_seconds']:.0f} s; "
+          f"training places at least {stats['min_distance_to_route_m']:.0f} m from the evaluation route\n")
+    print(f"## Embedding speed (target >= 200 images/s); load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs\n")
+    print("| threads | images | size | images/s | images per CPU second |\n|---|---|---|---|---|")
+    for threads in args.threads:
+        r = embedding_speed(root / "retrieval" / "model.ckpt", root / "places" / "repeat" / "places.npz", threads, args.repeats)
+        print(f"| {r['threads']} | {r['images']} | {r['size']} | {r['images_per_s']:.0f} | {r['images_per_cpu_s']:.0f} |")
+    print(f"\nin the localize_repeat stage: {metrics['embed_images_per_s']:.0f} images/s")
+
+
+if __name__ == "__main__":
+    main()
