@@ -10,7 +10,7 @@ import pytest
 
 from topoloc.errors import InputError
 from topoloc.geometry import quantize_angle
-from topoloc.trajectory.dataset import PathEncoder, load_sequences
+from topoloc.trajectory.dataset import MAX_OFFSET, PathEncoder, load_sequences, load_state_targets, state_targets
 from topoloc.trajectory.generate_dataset import generate, table_i
 from topoloc.trajectory.paths import Path, sample_paths
 from trajectory_helpers import make_graph, random_graph
@@ -112,3 +112,22 @@ def test_bad_input_names_the_key(tee, tmp_path):
     with pytest.raises(InputError, match=r"^encoding.angle_bins: must be an integer >= 4"):
         generate(tee, bad, *out)
     assert not (tmp_path / "t.parquet").exists()  # nothing half-written
+
+
+def test_state_targets_direction_and_offset_along_each_edge():
+    # nodes 5 -e7- 3 -e1- 9 -e4- 2: e7 travelled towards the lower id, e1 towards the higher, e4 the lower
+    directions, offsets = state_targets([5, 3, 9, 2], [7, 1, 4], np.array([7, 7, 1, 1, 1, 4]))
+    assert directions.tolist() == [0, 0, 1, 1, 1, 0]
+    assert offsets.tolist() == [0, 1, 0, 1, 2, 0]
+    # a first edge without virtual nodes has no token: the labels start on the second edge
+    directions, offsets = state_targets([5, 3, 9, 2], [7, 1, 4], np.array([1] * 40 + [4]))
+    assert directions.tolist() == [1] * 40 + [0]
+    assert offsets.max() == MAX_OFFSET and offsets[-1] == 0
+
+
+def test_state_targets_of_a_dataset_file(tmp_path, tee):
+    stats = generate(tee, conf(path_nodes=3, val_fraction=0.0), str(tmp_path / "t.parquet"), str(tmp_path / "v.parquet"))
+    tokens, labels = load_sequences(tmp_path / "t.parquet")
+    directions, offsets = load_state_targets(tmp_path / "t.parquet")
+    assert len(directions) == stats["train_trajectories"]
+    assert all(len(d) == len(o) == len(t) for d, o, t in zip(directions, offsets, tokens))

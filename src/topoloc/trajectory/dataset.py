@@ -126,3 +126,37 @@ def load_sequences(path: str | Path, limit: int | None = None) -> tuple[list[np.
     flat_l = labels.flatten().to_numpy().astype(np.int64)
     return ([flat_t[a:b] for a, b in zip(offsets[:-1], offsets[1:])],
             [flat_l[a:b] for a, b in zip(offsets[:-1], offsets[1:])])
+
+
+MAX_OFFSET = 31  # offsets along an edge beyond this share the last class
+
+
+def state_targets(nodes: list[int], edges: list[int], labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-step travel direction and offset along the current edge, the rest of the position a label leaves out.
+
+    Direction is 1 when the edge is travelled towards the higher node id (any
+    fixed orientation of each edge would do); the offset counts the steps
+    since the vehicle entered the edge (0 at the turn onto it), capped at
+    :data:`MAX_OFFSET`. Used as auxiliary training targets.
+    """
+    index = {edge: i for i, edge in enumerate(edges)}
+    labels = np.asarray(labels)
+    step = np.flatnonzero(np.r_[True, labels[1:] != labels[:-1]])  # first step on each edge
+    run = np.repeat(step, np.diff(np.r_[step, len(labels)]))
+    offsets = np.minimum(np.arange(len(labels)) - run, MAX_OFFSET)
+    position = np.array([index[int(edge)] for edge in labels[step]])
+    forward = np.asarray(nodes)[position] < np.asarray(nodes)[position + 1]
+    directions = np.repeat(forward.astype(np.int64), np.diff(np.r_[step, len(labels)]))
+    return directions, offsets.astype(np.int64)
+
+
+def load_state_targets(path: str | Path, limit: int | None = None) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """:func:`state_targets` of (the first ``limit``) rows of a dataset file."""
+    directions, offsets = [], []
+    for count, row in enumerate(iter_rows(path, ("nodes", "edges", "labels"))):
+        if limit is not None and count >= limit:
+            break
+        d, o = state_targets(row["nodes"], row["edges"], np.asarray(row["labels"]))
+        directions.append(d)
+        offsets.append(o)
+    return directions, offsets
