@@ -56,6 +56,7 @@ def workflow(tmp_path) -> Workflow:
     config_path = root / "config" / "config.yaml"
     config = yaml.safe_load(config_path.read_text())
     config["odometry"]["simulated"]["drives"] = 1
+    config["render"].update(length_m=120, sheet={"conditions": ["clear_noon", "night"], "frames": 2})
     config["dataset"]["max_paths_total"] = 2000
     config["train"].update(max_epochs=2, max_time_min=0.5)
     config_path.write_text(yaml.safe_dump(config, sort_keys=False))

@@ -73,7 +73,10 @@ def all_outputs():
 # Odometry drives: {drive} ranges over odometry.drives (kitti_*) or sim00.. (simulated).
 from topoloc.odometry.extract_odometry import drive_names
 
-DRIVES = drive_names(config["odometry"])
+try:
+    DRIVES = drive_names(config["odometry"], config.get("render"))
+except InputError as err:
+    _fail(str(err))
 if not DRIVES:
     _fail(f"odometry.drives: no drives configured for source {config['odometry']['source']}")
 
@@ -82,7 +85,7 @@ wildcard_constraints:
 
 
 def odometry_inputs(wildcards):
-    """The road graph plus the drive's files (poses, ground truth, times, GPS, stereo sequence)."""
+    """The road graph plus the drive's files (poses, ground truth, times, GPS, stereo sequence; rendered: render_drive's outputs)."""
     inputs = {"graph": rules.build_graph.output.graph.format(region=wildcards.region)}
     drive = (config["odometry"].get("drives") or {}).get(wildcards.drive) or {}
     for key in ("poses", "ground_truth", "times", "gps"):
@@ -90,4 +93,9 @@ def odometry_inputs(wildcards):
             inputs[key] = drive[key]
     if config["odometry"]["source"] == "kitti_stereo" and drive.get("sequence"):
         inputs["calib"] = os.path.join(drive["sequence"], "calib.txt")
+    if config["odometry"]["source"] == "rendered":
+        rendered = rules.render_drive.output
+        keys = {"calib": "calib", "ground_truth": "poses", "times": "times", "gps": "gps", "truth": "route",
+                "left": "left", "right": "right"}
+        inputs.update({k: rendered[v].format(region=wildcards.region, drive=wildcards.drive) for k, v in keys.items()})
     return inputs

@@ -4,7 +4,11 @@ Sources (``odometry.source``):
 
 * ``simulated``: random drives on the map with a noise model (:mod:`topoloc.odometry.simulate`);
 * ``kitti_poses``: a KITTI poses file (ground truth or any SLAM output), optional timestamps;
-* ``kitti_stereo``: our stereo visual odometry on a KITTI sequence folder (:mod:`topoloc.odometry.stereo_vo`).
+* ``kitti_stereo``: our stereo visual odometry on a KITTI sequence folder (:mod:`topoloc.odometry.stereo_vo`);
+* ``rendered``: the same stereo VO on a drive rendered from the map by the ``render_drive`` stage
+  (:mod:`topoloc.render.render_drive`): its sequence folder is the folder of ``inputs['calib']``, with
+  ground truth, timestamps and per-frame GPS beside it; ``inputs['truth']`` (``route.csv``) adds the true
+  road edge of every frame.
 
 Outputs: ``poses`` (estimate, KITTI format, local frame), ``frames`` (per-frame
 diagnostics: map position of estimate and ground truth, edge label, distance to
@@ -15,6 +19,7 @@ it, flag), ``stats`` (JSON), ``figure`` (top view on the map) and
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -32,7 +37,7 @@ from topoloc.odometry.simulate import simulate_drive
 
 log = logging.getLogger(__name__)
 
-SOURCES = ("simulated", "kitti_poses", "kitti_stereo")
+SOURCES = ("simulated", "kitti_poses", "kitti_stereo", "rendered")
 
 
 def simulated_drive_names(conf: dict[str, Any]) -> list[str]:
@@ -40,10 +45,16 @@ def simulated_drive_names(conf: dict[str, Any]) -> list[str]:
     return [f"sim{i:02d}" for i in range(int(conf["simulated"]["drives"]))]
 
 
-def drive_names(conf: dict[str, Any]) -> list[str]:
-    """The drives the workflow builds for the ``odometry`` config slice."""
+def drive_names(conf: dict[str, Any], render: dict[str, Any] | None = None) -> list[str]:
+    """The drives the workflow builds for the ``odometry`` config slice (and ``render`` for the rendered source)."""
     if conf["source"] == "simulated":
         return simulated_drive_names(conf)
+    if conf["source"] == "rendered":
+        from topoloc.render.render_drive import rendered_drive_names
+
+        if render is None:
+            raise InputError("render", "odometry.source rendered needs the render config section")
+        return rendered_drive_names(render)
     return list(conf.get("drives") or {})
 
 
@@ -67,7 +78,8 @@ def _load_kitti(conf: dict[str, Any], drive: str, inputs: dict[str, str]) -> dic
     else:
         from topoloc.odometry.stereo_vo import run_stereo_vo
 
-        est, flagged, extra = run_stereo_vo(conf["drives"][drive]["sequence"], conf["stereo"])
+        sequence = conf["drives"][drive]["sequence"] if conf["source"] == "kitti_stereo" else Path(inputs["calib"]).parent
+        est, flagged, extra = run_stereo_vo(sequence, conf["stereo"])
     gt = read_poses(inputs["ground_truth"]) if "ground_truth" in inputs else None
     if gt is not None and len(gt) != len(est):
         raise InputError(inputs["ground_truth"], f"{len(gt)} ground-truth poses for {len(est)} estimated poses")
@@ -120,6 +132,10 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
             log.warning("drive %s: no ground truth or GPS; labels come from the odometry itself", drive)
         if times is None:
             times = np.arange(len(est)) / float(conf["frame_rate_hz"])
+        if "truth" in inputs:
+            true_edges = pd.read_csv(inputs["truth"])["edge_id"].to_numpy()
+            if len(true_edges) != len(est):
+                raise InputError(inputs["truth"], f"{len(true_edges)} frames for {len(est)} estimated poses")
     label_xy = gt_map if gt_map is not None else (gps_xy if source != "simulated" and gps_xy is not None else est_map)
     mm = conf["map_matching"]
     match = match_track(graph, label_xy, radius_m=mm["radius_m"], sigma_m=mm["sigma_m"])
