@@ -67,6 +67,8 @@ def all_outputs():
         *expand(rules.extract_odometry.output, region=REGION, drive=DRIVES),
         *expand(rules.segment_trajectory.output, region=REGION, drive=DRIVES),
         *expand(rules.evaluate_rnn.output, region=REGION),
+        *expand(rules.decode_trajectories.output, region=REGION, drive=DRIVES),
+        *expand(rules.evaluate_localization.output, region=REGION),
     ]
 
 
