@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import make_graph, peaked_logits
+from localization_helpers import make_graph, peaked_logits
 
 from topoloc.localization.connectivity import consecutive_connected, directed_edges
 from topoloc.localization.decoders import beam_decode, decode_raw, log_softmax

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from conftest import irregular_grid
+from localization_helpers import irregular_grid
 
 from topoloc.localization.connectivity import consecutive_connected, directed_edges
 from topoloc.localization.hmm import CellHMM, HmmParams

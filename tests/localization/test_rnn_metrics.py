@@ -51,5 +51,8 @@ def test_unknown_model_is_one_line_error(tmp_path):
     with pytest.raises(InputError, match="checkpoint not found"):
         load_model(str(tmp_path / "missing.ckpt"))
     with pytest.raises(InputError, match="no trajectory model at runs:/0123456789abcdef0123456789abcdef/model") as err:
+        from mlflow import MlflowClient
+
+        MlflowClient(f"sqlite:///{tmp_path / 'mlflow.db'}").search_experiments()
         load_model("0123456789abcdef0123456789abcdef", tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")
     assert "\n" not in str(err.value)

@@ -75,6 +75,10 @@ def load_model(spec: str, tracking_uri: str | None = None) -> Any:
     from topoloc.tracking import tracking_uri as default_uri
 
     store = tracking_uri or default_uri()
+    if store.startswith("sqlite:///"):
+        db = Path(store[len("sqlite:///"):].split("?")[0])
+        if not db.is_file():
+            raise InputError(spec, f"no MLflow store at {db} to look up the run id in (set --tracking-uri or MLFLOW_TRACKING_URI)")
     mlflow.set_tracking_uri(store)
     try:
         model = mlflow.pytorch.load_model(uri, map_location="cpu")
