@@ -41,8 +41,9 @@ DEFAULTS: dict[str, Any] = {
         "hmm": {"enabled": True, "cell_m": 5.0, "angle_sigma_deg": 30.0, "distance_sigma_m": 2.5,
                 "straight_virtual_prob": 0.85, "floor": 0.01, "reset_prob": 0.0001, "heading_window_m": 10.0},
         "evaluate": {"confirm_m": 200.0, "initial_hypotheses": 5},
+        "max_offmap_m": 30.0,
+        "min_explained_turns": 0.5,
     },
-    "max_offmap_m": 30.0,
 }
 
 
@@ -93,20 +94,11 @@ def _georeference(args: argparse.Namespace, track: np.ndarray, yaw0: float, crs:
     return None
 
 
-def _offmap_distance(graph, xy: np.ndarray) -> float:
-    """Median distance of track points to the nearest road, in metres."""
-    import shapely
-
-    tree = shapely.STRtree([shapely.LineString(g) for g in graph.geometry])
-    points = shapely.points(xy[:: max(1, len(xy) // 500)])
-    _, dist = tree.query_nearest(points, return_distance=True, all_matches=False)
-    return float(np.median(dist))
-
-
 def localize(args: argparse.Namespace) -> dict[str, Any]:
     """The ``localize`` subcommand: returns a short summary (also printed)."""
     from topoloc.graph.road_graph import RoadGraph
-    from topoloc.localization.localize import Localizer, decoded_table, write_geojson, write_table
+    from topoloc.localization.localize import (Localizer, check_explained, check_on_map, decoded_table, write_geojson,
+                                               write_table)
     from topoloc.localization.rnn import load_model
     from topoloc.odometry.poses import planar_track, planar_yaw, read_poses
     from topoloc.odometry.segment_trajectory import encode_track
@@ -122,10 +114,7 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     geo = _georeference(args, track, float(planar_yaw(poses)[0]), graph.crs)
     xy = geo.apply(track) if geo is not None else track
     if geo is not None:
-        offmap = _offmap_distance(graph, xy)
-        if offmap > float(conf["max_offmap_m"]):
-            raise InputError(args.poses, f"the georeferenced track lies {offmap:.0f} m (median) from the roads of {args.graph}: "
-                                         "nothing matches; a drive for a different map?")
+        check_on_map(graph, xy, float(conf["localization"]["max_offmap_m"]), args.poses, args.graph)
     model = load_model(args.model, args.tracking_uri)
     seg = conf["segmentation"]
     track_tokens = encode_track(xy, graph.virtual_node_spacing_m, int(model.hparams.bins), float(seg["tolerance_m"]),
@@ -140,6 +129,8 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
         raise InputError("--decoder", f"{args.decoder!r} is not run; choose from {list(decoders)}")
     localizer = Localizer(model, graph, conf["localization"], hmm="hmm" in decoders)
     result = localizer.localize(tokens, decoders)
+    if geo is None:
+        check_explained(result, float(conf["localization"]["min_explained_turns"]), args.poses)
     frame = pd.DataFrame({"index": np.arange(len(tokens)), "token": tokens, "kind": track_tokens.kind,
                           "frame": track_tokens.frame, "distance_m": track_tokens.place_m})
     if geo is not None:

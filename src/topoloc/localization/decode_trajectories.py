@@ -18,7 +18,7 @@ import pandas as pd
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import write_json
-from topoloc.localization.localize import DECODERS, Localizer, decoded_table, write_geojson, write_table
+from topoloc.localization.localize import DECODERS, Localizer, check_on_map, decoded_table, write_geojson, write_table
 from topoloc.localization.rnn import load_model
 
 log = logging.getLogger(__name__)
@@ -44,6 +44,8 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     loc = conf["localization"]
     graph = RoadGraph.load(inputs["graph"])
     tokens = read_tokens(inputs["tokens"])
+    if {"x", "y"} <= set(tokens.columns):
+        check_on_map(graph, tokens[["x", "y"]].to_numpy(float), float(loc["max_offmap_m"]), inputs["tokens"], inputs["graph"])
     model = load_model(inputs["model"])
     localizer = Localizer(model, graph, loc, hmm=bool(loc["hmm"]["enabled"]))
     result = localizer.localize(tokens["token"].to_numpy(np.int64))

@@ -223,5 +223,19 @@ class CellHMM:
                 restarts += t > 0
                 cell = -1 - cell
         path = self.cell_edge[path_cells]
-        return Decoded(online, path, confidence, initial, restarts, np.full(len(tokens), n, np.int64),
-                       extra={"log_evidence": log_evidence})
+        extra = {"log_evidence": log_evidence, "explained_turns": self.explained_turns(tokens, path_cells),
+                 "turn_tokens": int(np.sum(tokens[1:] != straight_token(self.bins)))}
+        return Decoded(online, path, confidence, initial, restarts, np.full(len(tokens), n, np.int64), extra=extra)
+
+    def explained_turns(self, tokens: NDArray[np.int64], path_cells: NDArray[np.int64]) -> float:
+        """Share of the turn tokens (not straight) that the map's turn along the Viterbi path matches within ``angle_sigma_deg``.
+
+        On the map a drive was made on, most turns match; a drive from elsewhere has to be bent onto
+        roads that do not turn where it does (see ``localization.min_explained_turns``).
+        """
+        turns = np.flatnonzero(np.asarray(tokens)[1:] != straight_token(self.bins)) + 1
+        if len(turns) == 0:
+            return float("nan")
+        phi = turning_angle_from_headings(self.cell_heading[path_cells[turns - 1]], self.cell_heading[path_cells[turns]])
+        diff = np.abs(np.mod(np.asarray(bin_centre(tokens[turns], self.bins)) - phi + 180.0, 360.0) - 180.0)
+        return float(np.mean(diff <= self.params.angle_sigma_deg))

@@ -94,6 +94,36 @@ class Localizer:
         return Localization(out, logp, seconds)
 
 
+def offmap_distance(graph: RoadGraph, xy: NDArray[np.float64]) -> float:
+    """Median distance of (up to 500 of) the points ``xy`` to the nearest road, in metres."""
+    import shapely
+
+    tree = shapely.STRtree([shapely.LineString(g) for g in graph.geometry])
+    points = shapely.points(np.asarray(xy, float)[:: max(1, len(xy) // 500)])
+    _, dist = tree.query_nearest(points, return_distance=True, all_matches=False)
+    return float(np.median(dist))
+
+
+def check_on_map(graph: RoadGraph, xy: NDArray[np.float64], max_offmap_m: float, where: str, graph_name: str = "the map") -> None:
+    """InputError when a georeferenced drive lies away from the roads (a drive for a different map)."""
+    offmap = offmap_distance(graph, xy)
+    if offmap > max_offmap_m:
+        raise InputError(where, f"the georeferenced track lies {offmap:.0f} m (median) from the roads of {graph_name}: "
+                                "nothing matches; a drive for a different map?")
+
+
+def check_explained(result: Localization, min_share: float, where: str, min_turns: int = 8) -> None:
+    """InputError when the HMM's best path explains too few of the drive's turns (heuristic, without a georeference)."""
+    dec = result.decoded.get("hmm")
+    if dec is None:
+        return
+    share = dec.extra.get("explained_turns", float("nan"))
+    turns = dec.extra.get("turn_tokens", 0)
+    if turns >= min_turns and np.isfinite(share) and share < min_share:
+        raise InputError(where, f"nothing matches: the map turns where the drive does at only {share:.0%} of its {turns} turns "
+                                f"(localization.min_explained_turns {min_share:.0%}); a drive for a different map?")
+
+
 def decoded_table(tokens: pd.DataFrame, result: Localization) -> pd.DataFrame:
     """Per token: the input columns, then per decoder ``<name>_online``, ``<name>_path``, ``<name>_confidence``."""
     keep = [c for c in ("index", "token", "kind", "frame", "distance_m", "edge_id", "x", "y") if c in tokens.columns]
