@@ -123,6 +123,27 @@ class EncodedTrack:
     frame: NDArray[np.int64]
 
 
+def token_places(encoded: EncodedDrive, starts_m: NDArray[np.float64], lengths_m: NDArray[np.float64],
+                 spacing_m: NDArray[np.float64], turn_label_offset_m: float) -> tuple[NDArray[np.float64], list[str]]:
+    """Place of each token (metres along the track) and its kind (``virtual`` or ``turn``).
+
+    ``starts_m`` and ``lengths_m`` are per segment, ``spacing_m`` the virtual-node spacing per segment.
+    """
+    place = np.empty(len(encoded.tokens))
+    kind = []
+    virtual_index = 0
+    for t, s in enumerate(encoded.segment):
+        if s > 0 and (t == 0 or encoded.segment[t - 1] != s):  # the first token of segments 1.. is the turn into it
+            place[t] = starts_m[s] + min(turn_label_offset_m, lengths_m[s] / 2.0)
+            kind.append("turn")
+            virtual_index = 0
+        else:
+            virtual_index = virtual_index + 1 if t > 0 and encoded.segment[t - 1] == s else 1
+            place[t] = starts_m[s] + virtual_index * spacing_m[s]
+            kind.append("virtual")
+    return place, kind
+
+
 def encode_track(xy: NDArray[np.float64], spacing_m: float, bins: int, tolerance_m: float, lookahead_m: float,
                  turn_label_offset_m: float, corner_skip_m: float = 0.0) -> EncodedTrack:
     """Segment a track ``(n, 2)`` and encode it; each token's place (metres along the track) and frame.
@@ -133,19 +154,7 @@ def encode_track(xy: NDArray[np.float64], spacing_m: float, bins: int, tolerance
     seg = segment_track(xy, tolerance_m, lookahead_m, corner_skip_m=corner_skip_m)
     encoded = encode_segments(seg["lengths"], seg["heading_start"], seg["heading_end"], spacing_m, bins)
     corners, cum = seg["corners"], seg["cum"]
-    place = np.empty(len(encoded.tokens))
-    kind = []
-    virtual_index = 0
-    for t, s in enumerate(encoded.segment):
-        start_m = cum[corners[s]]
-        if s > 0 and (t == 0 or encoded.segment[t - 1] != s):  # the first token of segments 1.. is the turn into it
-            place[t] = start_m + min(turn_label_offset_m, seg["lengths"][s] / 2.0)
-            kind.append("turn")
-            virtual_index = 0
-        else:
-            virtual_index = virtual_index + 1 if t > 0 and encoded.segment[t - 1] == s else 1
-            place[t] = start_m + virtual_index * spacing_m
-            kind.append("virtual")
+    place, kind = token_places(encoded, cum[corners], seg["lengths"], np.full(len(seg["lengths"]), spacing_m), turn_label_offset_m)
     frame_of = np.clip(np.searchsorted(cum, place), 0, len(xy) - 1)
     return EncodedTrack(seg, encoded, kind, place, frame_of)
 
