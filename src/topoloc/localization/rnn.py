@@ -48,8 +48,13 @@ def edge_log_probs(model: Any, tokens: NDArray[np.int64], window: int | None = N
         piece = tokens[start:start + length]
         batch[row, :len(piece)] = piece
     model.eval()
-    with torch.no_grad():
-        logp = torch.log_softmax(model(torch.as_tensor(batch)).float(), dim=-1).numpy()
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # a few small windows: one thread is fastest, and never waits on a busy core
+    try:
+        with torch.inference_mode():
+            logp = torch.log_softmax(model(torch.as_tensor(batch)).float(), dim=-1).numpy()
+    finally:
+        torch.set_num_threads(threads)
     t = np.arange(steps)
     return logp[which, t - starts[which]]
 
