@@ -93,3 +93,35 @@ def odometry_inputs(wildcards):
     if config["odometry"]["source"] == "kitti_stereo" and drive.get("sequence"):
         inputs["calib"] = os.path.join(drive["sequence"], "calib.txt")
     return inputs
+
+
+def dataset_conf():
+    """Config slice of generate_dataset: segmentation only when training paths are segmented like drives."""
+    conf = {"encoding": config["encoding"], "dataset": config["dataset"], "region": config["region"]["name"]}
+    if config["dataset"]["encoding"] == "douglas_peucker":
+        conf["segmentation"] = config["segmentation"]
+    return conf
+
+
+def fig9_outputs():
+    """One Fig. 9 per drive, each declared for the report."""
+    return {
+        f"fig9_{drive}": report(
+            f"results/{{region}}/localization/fig9_{drive}.png",
+            caption="../report/fig9.rst",
+            category="Localization",
+            subcategory=drive,
+            labels={"region": "{region}", "drive": drive, "figure": "Fig. 9"},
+        )
+        for drive in DRIVES
+    }
+
+
+def evaluation_inputs(wildcards):
+    """The graph, and per drive its decoded table, decoding stats, frames and segments."""
+    inputs = {"graph": rules.build_graph.output.graph.format(region=wildcards.region)}
+    for drive in DRIVES:
+        paths = {"decoded": rules.decode_trajectories.output.table, "stats": rules.decode_trajectories.output.stats,
+                 "frames": rules.extract_odometry.output.frames, "segments": rules.segment_trajectory.output.segments}
+        inputs |= {f"{name}_{drive}": path.format(region=wildcards.region, drive=drive) for name, path in paths.items()}
+    return inputs

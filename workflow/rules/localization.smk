@@ -25,30 +25,6 @@ rule decode_trajectories:
         "../scripts/decode_trajectories.py"
 
 
-def fig9_outputs():
-    """One Fig. 9 per drive, each declared for the report."""
-    return {
-        f"fig9_{drive}": report(
-            f"results/{{region}}/localization/{drive}/fig9.png",
-            caption="../report/fig9.rst",
-            category="Localization",
-            subcategory=drive,
-            labels={"region": "{region}", "drive": drive, "figure": "Fig. 9"},
-        )
-        for drive in DRIVES
-    }
-
-
-def evaluation_inputs(wildcards):
-    """The graph, and per drive its decoded table, decoding stats, frames and segments."""
-    inputs = {"graph": rules.build_graph.output.graph.format(region=wildcards.region)}
-    for drive in DRIVES:
-        paths = {"decoded": rules.decode_trajectories.output.table, "stats": rules.decode_trajectories.output.stats,
-                 "frames": rules.extract_odometry.output.frames, "segments": rules.segment_trajectory.output.segments}
-        inputs |= {f"{name}_{drive}": path.format(region=wildcards.region, drive=drive) for name, path in paths.items()}
-    return inputs
-
-
 rule evaluate_localization:
     """Step accuracy, consistency, distance until localized, accuracy after, per drive and aggregated; Fig. 9 per drive."""
     input:

@@ -3,14 +3,6 @@ TRAJECTORY_DATA_CODE = ["encoding.py", "trajectory/paths.py", "trajectory/datase
                         "odometry/segment_trajectory.py"]
 
 
-def dataset_conf():
-    """Config slice of generate_dataset: segmentation only when training paths are segmented like drives."""
-    conf = {"encoding": config["encoding"], "dataset": config["dataset"], "region": config["region"]["name"]}
-    if config["dataset"]["encoding"] == "douglas_peucker":
-        conf["segmentation"] = config["segmentation"]
-    return conf
-
-
 rule generate_dataset:
     """DFS training trajectories (exactly dataset.path_nodes map nodes) as angle tokens and edge labels; Table I."""
     input:
