@@ -36,9 +36,9 @@ DEFAULTS: dict[str, Any] = {
     "encoding": {"heading_lookahead_m": 10.0},
     "localization": {
         "rnn": {"window": 60, "stride": 20},
-        "decode": {"k": 5, "initial_hypotheses": "all", "score": "joint", "reseed": 0, "reseed_penalty": 10.0,
+        "decode": {"k": 5, "initial_hypotheses": "all", "score": "joint", "reseed": 5, "reseed_penalty": 5.0,
                    "u_turns": "dead_ends", "max_skip_m": None},
-        "hmm": {"enabled": True, "cell_m": 5.0, "angle_sigma_deg": 30.0, "distance_sigma_m": 2.5,
+        "hmm": {"enabled": True, "cell_m": 5.0, "angle_sigma_deg": 20.0, "distance_sigma_m": 2.5,
                 "straight_virtual_prob": 0.85, "floor": 0.01, "reset_prob": 0.0001, "heading_window_m": 10.0},
         "evaluate": {"confirm_m": 200.0, "initial_hypotheses": 5},
         "max_offmap_m": 30.0,

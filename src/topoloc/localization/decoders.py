@@ -88,7 +88,7 @@ def beam_decode(
     initial: str = "all",
     score: str = "joint",
     reseed: int = 0,
-    reseed_penalty: float = 10.0,
+    reseed_penalty: float = 5.0,
     initial_k: int = 5,
 ) -> Decoded:
     """Multi-hypothesis decoding of ``logp`` ``(T, E)`` on ``states`` (see the module docstring)."""

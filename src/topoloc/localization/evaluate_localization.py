@@ -49,7 +49,7 @@ def aggregate(rows: pd.DataFrame) -> pd.DataFrame:
     out = []
     for name, group in rows.groupby("decoder", sort=False):
         w = group.steps.to_numpy(float)
-        after_steps = np.where(group.localized_m.notna(), group.steps, 0.0)  # approximate weight of after-localization steps
+        after_steps = group.steps_after.to_numpy(float)  # steps from localization on, per drive
         row = {"drive": "all", "decoder": name, "steps": w.sum(), "length_m": group.length_m.sum(),
                "accuracy": np.average(group.accuracy, weights=w), "path_accuracy": np.average(group.path_accuracy, weights=w),
                "consistency": np.average(group.consistency, weights=w), "localized_m": group.localized_m.mean(),

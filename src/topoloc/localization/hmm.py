@@ -53,7 +53,7 @@ class HmmParams:
     """Parameters of the baseline (config ``localization.hmm``)."""
 
     cell_m: float = 5.0
-    angle_sigma_deg: float = 30.0
+    angle_sigma_deg: float = 20.0
     distance_sigma_m: float = 2.5
     straight_virtual_prob: float = 0.85
     floor: float = 0.01

@@ -60,6 +60,7 @@ def drive_metrics(truth: NDArray[np.int64], online: NDArray[np.int64], path: NDA
         "path_accuracy": float((path == truth).mean()),
         "consistency": float(connected.mean()) if len(connected) else 1.0,
         "localized_m": float(distance[step]) if step is not None else np.nan,
+        "steps_after": float(len(truth) - step) if step is not None else 0.0,
         "accuracy_after": float(correct[step:].mean()) if step is not None else np.nan,
         "path_accuracy_after": float((path[step:] == truth[step:]).mean()) if step is not None else np.nan,
         "right_from_m": right_from,
