@@ -10,7 +10,7 @@ import pytest
 
 from topoloc.errors import InputError
 from topoloc.geometry import quantize_angle
-from topoloc.trajectory.dataset import MAX_OFFSET, PathEncoder, load_sequences, load_state_targets, state_targets
+from topoloc.trajectory.dataset import MAX_OFFSET, Noise, PathEncoder, load_sequences, load_state_targets, state_targets
 from topoloc.trajectory.generate_dataset import generate, table_i
 from topoloc.trajectory.paths import Path, sample_paths
 from trajectory_helpers import make_graph, random_graph
@@ -45,6 +45,20 @@ def test_left_and_right_turns_with_virtual_nodes(tee):
     assert tokens.tolist() == [STRAIGHT] * 2 + [STRAIGHT] + [STRAIGHT] * 3
     assert labels.tolist() == [1] * 2 + [2] * 4  # the token at B already lies on the new edge
 
+
+
+def test_segmented_encoding_is_that_of_a_drive(tee):
+    seg = {"tolerance_m": 5.0, "corner_skip_m": 10.0, "turn_label_offset_m": 5.0}
+    encoder = PathEncoder(tee, 20, 10.0, seg)
+    # straight on through B (50 m + 70 m): one straight segment of 120 m, no token for B, 5 virtual nodes
+    tokens, labels = encoder.encode(Path((3, 2, 4), (1, 2)))
+    assert tokens.tolist() == [STRAIGHT] * 5
+    assert labels.tolist() == [1, 1, 2, 2, 2]  # virtual nodes at 20, 40 (edge 1), 60, 80, 100 m (edge 2)
+    tokens, labels = encoder.encode(Path((1, 2, 3), (0, 1)))  # a corner at B: the same as the node encoding
+    assert tokens.tolist() == [STRAIGHT] * 4 + [LEFT] + [STRAIGHT] * 2
+    assert labels.tolist() == [0] * 4 + [1] * 3
+    noisy = encoder.encode(Path((1, 2, 3), (0, 1)), np.random.default_rng(0), Noise(1, 5.0, 0.1))
+    assert len(noisy[0]) == len(noisy[1]) and set(noisy[1].tolist()) <= {0, 1}
 
 def test_encoder_matches_shared_encoding_module():
     from topoloc.encoding import encode_segments, polyline_end_headings
