@@ -52,13 +52,13 @@ def test_pipeline_caching_and_tracking(workflow):
     loc = root / "results" / "helsinki" / "localization"
     table = (loc / "localization.md").read_text()
     assert all(name in table for name in ("raw (argmax)", "Strategy 1", "Strategy 2", "HMM baseline", "**all**"))
-    assert (loc / "fig9_sim00.png").stat().st_size > 10_000 and (loc / "sim00" / "strategy1.geojson").is_file()
-    decoded = (loc / "sim00" / "decoded.csv").read_text().splitlines()
-    assert len(decoded) > 20 and "strategy1_path" in decoded[0] and "true_edge_id" in decoded[0]
+    assert (loc / "fig9_ren00_clear_noon.png").stat().st_size > 10_000 and (loc / "ren00_clear_noon" / "strategy1.geojson").is_file()
+    decoded = (loc / "ren00_clear_noon" / "decoded.csv").read_text().splitlines()
+    assert len(decoded) > 4 and "strategy1_path" in decoded[0] and "true_edge_id" in decoded[0]
     report = root / "results" / "helsinki" / "report.html"
-    assert report.stat().st_size > 100_000 and b"fig9_sim00.png" in report.read_bytes()
+    assert report.stat().st_size > 100_000 and b"fig9_ren00_clear_noon.png" in report.read_bytes()
     evaluate = children["evaluate_localization"]
-    assert {"localization.md", "fig9_sim00.png"} <= {a.path for a in client.list_artifacts(evaluate.info.run_id)}
+    assert {"localization.md", "fig9_ren00_clear_noon.png"} <= {a.path for a in client.list_artifacts(evaluate.info.run_id)}
     assert "strategy1_accuracy" in evaluate.data.metrics and "report.html" in {
         a.path for a in client.list_artifacts(children["report_html"].info.run_id)}
 
