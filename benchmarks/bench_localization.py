@@ -28,7 +28,6 @@ import pandas as pd
 import yaml
 
 from topoloc.graph.road_graph import RoadGraph
-from topoloc.localization.connectivity import directed_edges
 from topoloc.localization.decoders import beam_decode
 from topoloc.localization.localize import LABELS, Localizer
 from topoloc.localization.metrics import drive_metrics

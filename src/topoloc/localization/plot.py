@@ -19,6 +19,14 @@ from topoloc.io import atomic_path  # noqa: E402
 RIGHT, WRONG = "tab:blue", "tab:red"
 
 
+def _extent(graph: RoadGraph, xy: np.ndarray, edges) -> np.ndarray:
+    """Bounding box of the track and ``edges``, padded."""
+    allxy = np.vstack([xy] + [graph.geometry[int(e)] for e in set(edges)])
+    lo, hi = allxy.min(axis=0), allxy.max(axis=0)
+    pad = 0.06 * float(max(hi - lo)) + 30.0
+    return np.array([lo - pad, hi + pad])
+
+
 def _base(ax, graph: RoadGraph, extent: np.ndarray, title: str) -> None:
     ax.add_collection(LineCollection(graph.geometry, colors="0.82", linewidths=0.8, zorder=1))
     (x0, y0), (x1, y1) = extent
@@ -56,11 +64,7 @@ def plot_fig9(graph: RoadGraph, table: pd.DataFrame, frames: pd.DataFrame, corne
     xy = frames[["x", "y"]].to_numpy(float)
     truth = table["true_edge_id"].to_numpy() if "true_edge_id" in table.columns else None
     truth_set = set(int(e) for e in truth) if truth is not None else set()
-    pts = [xy] + [graph.geometry[e] for e in truth_set]
-    allxy = np.vstack(pts)
-    lo, hi = allxy.min(axis=0), allxy.max(axis=0)
-    pad = 0.08 * float(max(hi - lo)) + 30.0
-    extent = np.array([lo - pad, hi + pad])
+    extent = _extent(graph, xy, truth_set)  # panels with edges off the route zoom out to show them
     decoders = [name for name in ("raw", "strategy1", "strategy2", "hmm") if f"{name}_path" in table.columns]
     names = {"raw": "(d) raw RNN argmax", "strategy1": "(e) Strategy 1", "strategy2": "(f) Strategy 2", "hmm": "(g) HMM baseline"}
     fig, axes = plt.subplots(2, 4, figsize=(18, 9.5), dpi=100)
@@ -73,7 +77,7 @@ def plot_fig9(graph: RoadGraph, table: pd.DataFrame, frames: pd.DataFrame, corne
     _base(axes[1], graph, extent, "(b) ground-truth edges")
     if truth is not None:
         _edges(axes[1], graph, sorted(truth_set), "tab:green")
-    _base(axes[2], graph, extent, f"(c) top {len(initial)} initial hypotheses")
+    _base(axes[2], graph, _extent(graph, xy, truth_set | set(initial)), f"(c) top {len(initial)} initial hypotheses")
     _edges(axes[2], graph, initial, [plt.cm.viridis(i / max(1, len(initial))) for i in range(len(initial))], labels=True)
     for ax, name in zip(axes[3:7], decoders):
         m = metrics.get(name, {})
@@ -82,7 +86,7 @@ def plot_fig9(graph: RoadGraph, table: pd.DataFrame, frames: pd.DataFrame, corne
         if name != "raw":
             loc = m.get("localized_m", np.nan)
             sub += f"\nonline acc {m.get('accuracy', np.nan):.2f}, localized " + (f"after {loc:.0f} m" if np.isfinite(loc) else "never")
-        _base(ax, graph, extent, f"{names[name]}: {sub}")
+        _base(ax, graph, _extent(graph, xy, truth_set | set(table[col].tolist())), f"{names[name]}: {sub}")
         _decoded(ax, graph, table[col].to_numpy(), truth_set)
     for ax in axes[3 + len(decoders):]:
         ax.axis("off")
