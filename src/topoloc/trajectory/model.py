@@ -24,7 +24,7 @@ import torch
 from torch import nn
 from torch.utils.data import DataLoader, Dataset, Sampler
 
-from topoloc.trajectory.dataset import MAX_OFFSET
+from topoloc.trajectory.dataset import MAX_OFFSET, load_sequences, load_state_targets
 
 IGNORE = -100
 CELLS = {"rnn": nn.RNN, "gru": nn.GRU, "lstm": nn.LSTM}
@@ -189,14 +189,12 @@ class TrajectoryData(L.LightningDataModule):
         self.val: Sequences | None = None
 
     def setup(self, stage: str | None = None) -> None:
-        from topoloc.trajectory.dataset import load_sequences, load_state_targets  # pyarrow only when needed
-
         if self.train is None:
             extra = (lambda path: load_state_targets(path)) if self.state_targets else (lambda path: ())
             self.train = Sequences(*load_sequences(self.train_path), *extra(self.train_path))
             self.val = Sequences(*load_sequences(self.val_path), *extra(self.val_path))
 
-    def _collate(self, items: Sequence[tuple[torch.Tensor, torch.Tensor]]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def _collate(self, items: Sequence[tuple[torch.Tensor, ...]]) -> tuple[torch.Tensor, ...]:
         return pad_batch(items, self.bins)
 
     def train_dataloader(self) -> DataLoader:
