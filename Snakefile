@@ -19,12 +19,14 @@ include: "workflow/rules/extract_odometry.smk"
 include: "workflow/rules/segment_trajectory.smk"
 include: "workflow/rules/trajectory.smk"
 include: "workflow/rules/place.smk"
+include: "workflow/rules/localization.smk"
 
 
 rule all:
     default_target: True
     input:
         all_outputs(),
+        expand(rules.report_html.output, region=REGION),
 
 
 onsuccess:

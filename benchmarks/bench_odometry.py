@@ -81,7 +81,8 @@ def segmentation_seconds(poses_file: Path, repeats: int) -> tuple[float, int, in
     seconds = []
     for _ in range(repeats):
         started = time.perf_counter()
-        out = segment_track(xy, float(seg["tolerance_m"]), float(conf["encoding"]["heading_lookahead_m"]))
+        out = segment_track(xy, float(seg["tolerance_m"]), float(conf["encoding"]["heading_lookahead_m"]),
+                            corner_skip_m=float(seg["corner_skip_m"]))
         encoded = encode_segments(out["lengths"], out["heading_start"], out["heading_end"], spacing, bins)
         seconds.append(time.perf_counter() - started)
     return statistics.median(seconds), len(xy), len(encoded.tokens)

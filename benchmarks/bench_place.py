@@ -1,12 +1,12 @@
 """Benchmark of place recognition: embedding speed and the teach-and-repeat localization targets.
 
-Usage (after ``snakemake all`` built ``results/<region>/localization``)::
+Usage (after ``snakemake all`` built ``results/<region>/teach_repeat``)::
 
     PYTHONPATH=src python benchmarks/bench_place.py [--region helsinki] [--repeats 5] [--threads 1 2]
 
 Prints markdown:
 
-- the localization table of ``results/<region>/localization/summary.csv`` (share of repeat frames within
+- the localization table of ``results/<region>/teach_repeat/summary.csv`` (share of repeat frames within
   5 m and 2 m, relocalizations, per condition and method) against the targets: at least 90 % within 5 m
   in every condition, ahead of the raw-correlation baseline;
 - embedding speed of the trained network (``results/<region>/retrieval/model.ckpt``) on the repeat images
@@ -68,8 +68,8 @@ def main() -> None:
     parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     args = parser.parse_args()
     root = Path("results") / args.region
-    summary = pd.read_csv(root / "localization" / "summary.csv")
-    metrics = json.loads((root / "localization" / "metrics.json").read_text())
+    summary = pd.read_csv(root / "teach_repeat" / "summary.csv")
+    metrics = json.loads((root / "teach_repeat" / "metrics.json").read_text())
     train = json.loads((root / "retrieval" / "train_metrics.json").read_text())
     stats = json.loads((root / "places" / "train" / "stats.json").read_text())
     held_out = sorted(set(summary.condition[summary.held_out]))

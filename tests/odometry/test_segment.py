@@ -37,3 +37,23 @@ def test_standstill_frames_are_ignored():
     seg = segment_track(xy, tolerance_m=3.0, lookahead_m=10.0)
     assert len(seg["corners"]) == 3
     assert seg["lengths"].sum() == pytest.approx(160.0)
+
+
+def rounded_right_turn(radius=12.0, step=0.5):
+    """100 m north, a quarter circle of ``radius`` turning right (east), 100 m east."""
+    a = np.column_stack([np.zeros(201), np.arange(0, 100.5, step)])
+    phi = np.linspace(np.pi, np.pi / 2, 40)[1:]
+    arc = np.column_stack([radius + radius * np.cos(phi), 100.0 + radius * np.sin(phi)])
+    b = np.column_stack([np.arange(radius + step, radius + 100, step), np.full(len(np.arange(radius + step, radius + 100, step)), 100.0 + radius)])
+    return np.vstack([a, arc, b])
+
+
+def test_corner_skip_measures_a_rounded_turn_like_the_map():
+    right = quantize_angle(270.0, 20)
+    turns = {}
+    for skip in (0.0, 10.0):
+        seg = segment_track(rounded_right_turn(), tolerance_m=5.0, lookahead_m=10.0, corner_skip_m=skip)
+        enc = encode_segments(seg["lengths"], seg["heading_start"], seg["heading_end"], 20.0, 20)
+        turns[skip] = [t for t in enc.tokens.tolist() if t != straight_token(20)]
+    assert turns[10.0] == [right]  # headings away from the rounded part: the map's 90 degrees
+    assert turns[0.0] != [right]  # at the corner the vehicle is still turning: too small an angle

@@ -10,7 +10,7 @@ import pytest
 
 from topoloc.errors import InputError
 from topoloc.geometry import quantize_angle
-from topoloc.trajectory.dataset import PathEncoder, load_sequences
+from topoloc.trajectory.dataset import MAX_OFFSET, Noise, PathEncoder, load_sequences, load_state_targets, state_targets
 from topoloc.trajectory.generate_dataset import generate, table_i
 from topoloc.trajectory.paths import Path, sample_paths
 from trajectory_helpers import make_graph, random_graph
@@ -45,6 +45,20 @@ def test_left_and_right_turns_with_virtual_nodes(tee):
     assert tokens.tolist() == [STRAIGHT] * 2 + [STRAIGHT] + [STRAIGHT] * 3
     assert labels.tolist() == [1] * 2 + [2] * 4  # the token at B already lies on the new edge
 
+
+
+def test_segmented_encoding_is_that_of_a_drive(tee):
+    seg = {"tolerance_m": 5.0, "corner_skip_m": 10.0, "turn_label_offset_m": 5.0}
+    encoder = PathEncoder(tee, 20, 10.0, seg)
+    # straight on through B (50 m + 70 m): one straight segment of 120 m, no token for B, 5 virtual nodes
+    tokens, labels = encoder.encode(Path((3, 2, 4), (1, 2)))
+    assert tokens.tolist() == [STRAIGHT] * 5
+    assert labels.tolist() == [1, 1, 2, 2, 2]  # virtual nodes at 20, 40 (edge 1), 60, 80, 100 m (edge 2)
+    tokens, labels = encoder.encode(Path((1, 2, 3), (0, 1)))  # a corner at B: the same as the node encoding
+    assert tokens.tolist() == [STRAIGHT] * 4 + [LEFT] + [STRAIGHT] * 2
+    assert labels.tolist() == [0] * 4 + [1] * 3
+    noisy = encoder.encode(Path((1, 2, 3), (0, 1)), np.random.default_rng(0), Noise(1, 5.0, 0.1))
+    assert len(noisy[0]) == len(noisy[1]) and set(noisy[1].tolist()) <= {0, 1}
 
 def test_encoder_matches_shared_encoding_module():
     from topoloc.encoding import encode_segments, polyline_end_headings
@@ -112,3 +126,22 @@ def test_bad_input_names_the_key(tee, tmp_path):
     with pytest.raises(InputError, match=r"^encoding.angle_bins: must be an integer >= 4"):
         generate(tee, bad, *out)
     assert not (tmp_path / "t.parquet").exists()  # nothing half-written
+
+
+def test_state_targets_direction_and_offset_along_each_edge():
+    # nodes 5 -e7- 3 -e1- 9 -e4- 2: e7 travelled towards the lower id, e1 towards the higher, e4 the lower
+    directions, offsets = state_targets([5, 3, 9, 2], [7, 1, 4], np.array([7, 7, 1, 1, 1, 4]))
+    assert directions.tolist() == [0, 0, 1, 1, 1, 0]
+    assert offsets.tolist() == [0, 1, 0, 1, 2, 0]
+    # a first edge without virtual nodes has no token: the labels start on the second edge
+    directions, offsets = state_targets([5, 3, 9, 2], [7, 1, 4], np.array([1] * 40 + [4]))
+    assert directions.tolist() == [1] * 40 + [0]
+    assert offsets.max() == MAX_OFFSET and offsets[-1] == 0
+
+
+def test_state_targets_of_a_dataset_file(tmp_path, tee):
+    stats = generate(tee, conf(path_nodes=3, val_fraction=0.0), str(tmp_path / "t.parquet"), str(tmp_path / "v.parquet"))
+    tokens, labels = load_sequences(tmp_path / "t.parquet")
+    directions, offsets = load_state_targets(tmp_path / "t.parquet")
+    assert len(directions) == stats["train_trajectories"]
+    assert all(len(d) == len(o) == len(t) for d, o, t in zip(directions, offsets, tokens))

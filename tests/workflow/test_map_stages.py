@@ -48,9 +48,23 @@ def test_pipeline_caching_and_tracking(workflow):
     artifacts = {a.path for a in client.list_artifacts(build.info.run_id)}
     assert {"stats.json", "map.png", "logs"} <= artifacts
 
-    # Place recognition: per-condition tables, metrics per condition, the network logged as an MLflow model.
+    # Localization: every decoder on every drive, the table, Fig. 9, the HTML report; one MLflow run each.
     loc = root / "results" / "helsinki" / "localization"
-    assert "| method | Mean | overcast | sunset | rain | fog (held out) | night |" in (loc / "tables.md").read_text()
+    table = (loc / "localization.md").read_text()
+    assert all(name in table for name in ("raw (argmax)", "Strategy 1", "Strategy 2", "HMM baseline", "**all**"))
+    assert (loc / "fig9_ren00_clear_noon.png").stat().st_size > 10_000 and (loc / "ren00_clear_noon" / "strategy1.geojson").is_file()
+    decoded = (loc / "ren00_clear_noon" / "decoded.csv").read_text().splitlines()
+    assert len(decoded) > 4 and "strategy1_path" in decoded[0] and "true_edge_id" in decoded[0]
+    report = root / "results" / "helsinki" / "report.html"
+    assert report.stat().st_size > 100_000 and b"fig9_ren00_clear_noon.png" in report.read_bytes()
+    evaluate = children["evaluate_localization"]
+    assert {"localization.md", "fig9_ren00_clear_noon.png"} <= {a.path for a in client.list_artifacts(evaluate.info.run_id)}
+    assert "strategy1_accuracy" in evaluate.data.metrics and "report.html" in {
+        a.path for a in client.list_artifacts(children["report_html"].info.run_id)}
+
+    # Place recognition: per-condition tables, metrics per condition, the network logged as an MLflow model.
+    teach_repeat = root / "results" / "helsinki" / "teach_repeat"
+    assert "| method | Mean | overcast | sunset | rain | fog (held out) | night |" in (teach_repeat / "tables.md").read_text()
     assert {"network_within_5m_fog", "correlation_within_5m_night", "embed_images_per_s"} <= set(
         children["localize_repeat"].data.metrics)
     assert "val_acc_fog" in children["train_retrieval"].data.metrics

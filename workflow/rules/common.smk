@@ -67,6 +67,8 @@ def all_outputs():
         *expand(rules.extract_odometry.output, region=REGION, drive=DRIVES),
         *expand(rules.segment_trajectory.output, region=REGION, drive=DRIVES),
         *expand(rules.evaluate_rnn.output, region=REGION),
+        *expand(rules.decode_trajectories.output, region=REGION, drive=DRIVES),
+        *expand(rules.evaluate_localization.output, region=REGION),
         *expand(rules.localize_repeat.output, region=REGION),
         *expand(rules.build_topometric_map.output, region=REGION),
         *expand(rules.render_places.output, region=REGION, split=["train", "teach", "repeat"]),
@@ -101,4 +103,36 @@ def odometry_inputs(wildcards):
         keys = {"calib": "calib", "ground_truth": "poses", "times": "times", "gps": "gps", "truth": "route",
                 "left": "left", "right": "right"}
         inputs.update({k: rendered[v].format(region=wildcards.region, drive=wildcards.drive) for k, v in keys.items()})
+    return inputs
+
+
+def dataset_conf():
+    """Config slice of generate_dataset: segmentation only when training paths are segmented like drives."""
+    conf = {"encoding": config["encoding"], "dataset": config["dataset"], "region": config["region"]["name"]}
+    if config["dataset"]["encoding"] == "douglas_peucker":
+        conf["segmentation"] = config["segmentation"]
+    return conf
+
+
+def fig9_outputs():
+    """One Fig. 9 per drive, each declared for the report."""
+    return {
+        f"fig9_{drive}": report(
+            f"results/{{region}}/localization/fig9_{drive}.png",
+            caption="../report/fig9.rst",
+            category="Localization",
+            subcategory=drive,
+            labels={"region": "{region}", "drive": drive, "figure": "Fig. 9"},
+        )
+        for drive in DRIVES
+    }
+
+
+def evaluation_inputs(wildcards):
+    """The graph, and per drive its decoded table, decoding stats, frames and segments."""
+    inputs = {"graph": rules.build_graph.output.graph.format(region=wildcards.region)}
+    for drive in DRIVES:
+        paths = {"decoded": rules.decode_trajectories.output.table, "stats": rules.decode_trajectories.output.stats,
+                 "frames": rules.extract_odometry.output.frames, "segments": rules.segment_trajectory.output.segments}
+        inputs |= {f"{name}_{drive}": path.format(region=wildcards.region, drive=drive) for name, path in paths.items()}
     return inputs

@@ -1,5 +1,6 @@
 # Library code per stage (editing a module reruns exactly the stages that use it).
-TRAJECTORY_DATA_CODE = ["encoding.py", "trajectory/paths.py", "trajectory/dataset.py", "trajectory/generate_dataset.py"]
+TRAJECTORY_DATA_CODE = ["encoding.py", "trajectory/paths.py", "trajectory/dataset.py", "trajectory/generate_dataset.py",
+                        "odometry/segment_trajectory.py"]
 
 
 rule generate_dataset:
@@ -17,7 +18,7 @@ rule generate_dataset:
             labels={"region": "{region}", "figure": "Table I"},
         ),
     params:
-        conf={"encoding": config["encoding"], "dataset": config["dataset"], "region": config["region"]["name"]},
+        conf=dataset_conf(),
         code=code("graph", *TRAJECTORY_DATA_CODE),
     log:
         "results/{region}/logs/generate_dataset.log",

@@ -4,8 +4,9 @@ The georeferenced odometry track (``frames.csv`` of ``extract_odometry``) is
 simplified with Douglas-Peucker (``segmentation.tolerance_m``); its corners cut
 the track into segments. Each segment's length is the odometry's path length
 between its corners, its start/end headings the direction of travel over
-``encoding.heading_lookahead_m`` (shared with the training paths) after its first / before its last corner
-(:func:`topoloc.encoding.polyline_end_headings`). The segments go through
+``encoding.heading_lookahead_m`` (shared with the training paths) after its first / before its last corner,
+leaving out ``segmentation.corner_skip_m`` next to each corner, where a vehicle is still rounding it
+(:func:`track_end_headings`). The segments go through
 :func:`topoloc.encoding.encode_segments`, the same function as the training
 routes, so train and test tokens share one convention.
 
@@ -18,15 +19,16 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from topoloc.encoding import encode_segments, polyline_end_headings
+from topoloc.encoding import EncodedDrive, encode_segments, heading_deg, polyline_end_headings
 from topoloc.errors import InputError
-from topoloc.geometry import straight_token
+from topoloc.geometry import point_along, straight_token
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json
 from topoloc.odometry.plot import plot_segments
@@ -64,8 +66,31 @@ def douglas_peucker(points: NDArray[np.float64], tolerance: float) -> NDArray[np
     return np.flatnonzero(keep)
 
 
-def segment_track(xy: NDArray[np.float64], tolerance_m: float, lookahead_m: float, min_step_m: float = 0.05) -> dict[str, NDArray]:
-    """DP corners (frame indices) and per-segment length and start/end headings of a track (n, 2)."""
+def track_end_headings(coords: NDArray[np.float64], lookahead_m: float, skip_m: float = 0.0) -> tuple[float, float]:
+    """Travel headings at the start and end of a track piece over ``lookahead_m``, ``skip_m`` away from its ends.
+
+    Like :func:`topoloc.encoding.polyline_end_headings` (the same with ``skip_m = 0``), but leaving out
+    ``skip_m`` (at most a quarter of the piece) next to each end first: a vehicle rounds a corner, so the
+    track right at a corner still turns, where a map road drawn through its intersection node does not.
+    """
+    if skip_m <= 0:
+        return polyline_end_headings(coords, lookahead_m)
+    pts = np.asarray(coords, dtype=float)
+    length = float(np.hypot(*np.diff(pts, axis=0).T).sum())
+    skip = min(skip_m, length / 4.0)
+    reach = min(lookahead_m, length / 2.0 - skip)
+    start = heading_deg(point_along(pts, skip), point_along(pts, skip + reach))
+    end = heading_deg(point_along(pts, length - skip - reach), point_along(pts, length - skip))
+    return start, end
+
+
+def segment_track(xy: NDArray[np.float64], tolerance_m: float, lookahead_m: float, min_step_m: float = 0.05,
+                  corner_skip_m: float = 0.0) -> dict[str, NDArray]:
+    """DP corners (frame indices) and per-segment length and start/end headings of a track (n, 2).
+
+    Headings are measured over ``lookahead_m`` after skipping ``corner_skip_m`` next to each corner
+    (:func:`track_end_headings`).
+    """
     xy = np.asarray(xy, float)
     step = np.hypot(*np.diff(xy, axis=0).T)
     cum = np.concatenate([[0.0], np.cumsum(step)])
@@ -79,12 +104,59 @@ def segment_track(xy: NDArray[np.float64], tolerance_m: float, lookahead_m: floa
         piece = xy[a:b + 1][moving[a:b + 1]]
         if len(piece) < 2:
             piece = xy[[a, b]]
-        start, end = polyline_end_headings(piece, lookahead_m)
+        start, end = track_end_headings(piece, lookahead_m, corner_skip_m)
         lengths.append(cum[b] - cum[a])
         h0.append(start)
         h1.append(end)
     return {"corners": corners, "cum": cum, "lengths": np.asarray(lengths), "heading_start": np.asarray(h0),
             "heading_end": np.asarray(h1)}
+
+
+@dataclass(frozen=True)
+class EncodedTrack:
+    """A track's segmentation (:func:`segment_track`), its tokens, and per token its kind, place and frame."""
+
+    segments: dict[str, NDArray]
+    encoded: EncodedDrive
+    kind: list[str]
+    place_m: NDArray[np.float64]
+    frame: NDArray[np.int64]
+
+
+def token_places(encoded: EncodedDrive, starts_m: NDArray[np.float64], lengths_m: NDArray[np.float64],
+                 spacing_m: NDArray[np.float64], turn_label_offset_m: float) -> tuple[NDArray[np.float64], list[str]]:
+    """Place of each token (metres along the track) and its kind (``virtual`` or ``turn``).
+
+    ``starts_m`` and ``lengths_m`` are per segment, ``spacing_m`` the virtual-node spacing per segment.
+    """
+    place = np.empty(len(encoded.tokens))
+    kind = []
+    virtual_index = 0
+    for t, s in enumerate(encoded.segment):
+        if s > 0 and (t == 0 or encoded.segment[t - 1] != s):  # the first token of segments 1.. is the turn into it
+            place[t] = starts_m[s] + min(turn_label_offset_m, lengths_m[s] / 2.0)
+            kind.append("turn")
+            virtual_index = 0
+        else:
+            virtual_index = virtual_index + 1 if t > 0 and encoded.segment[t - 1] == s else 1
+            place[t] = starts_m[s] + virtual_index * spacing_m[s]
+            kind.append("virtual")
+    return place, kind
+
+
+def encode_track(xy: NDArray[np.float64], spacing_m: float, bins: int, tolerance_m: float, lookahead_m: float,
+                 turn_label_offset_m: float, corner_skip_m: float = 0.0) -> EncodedTrack:
+    """Segment a track ``(n, 2)`` and encode it; each token's place (metres along the track) and frame.
+
+    A virtual-node token sits ``k * spacing`` along its segment; a turn token
+    ``turn_label_offset_m`` past its corner (at most half the segment), on the road taken after the turn.
+    """
+    seg = segment_track(xy, tolerance_m, lookahead_m, corner_skip_m=corner_skip_m)
+    encoded = encode_segments(seg["lengths"], seg["heading_start"], seg["heading_end"], spacing_m, bins)
+    corners, cum = seg["corners"], seg["cum"]
+    place, kind = token_places(encoded, cum[corners], seg["lengths"], np.full(len(seg["lengths"]), spacing_m), turn_label_offset_m)
+    frame_of = np.clip(np.searchsorted(cum, place), 0, len(xy) - 1)
+    return EncodedTrack(seg, encoded, kind, place, frame_of)
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
@@ -103,28 +175,14 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     if len(xy) < 2:
         raise InputError(inputs["frames"], "a drive needs at least two frames")
     started = time.perf_counter()
-    seg = segment_track(xy, float(seg_conf["tolerance_m"]), float(conf["encoding"]["heading_lookahead_m"]))
-    encoded = encode_segments(seg["lengths"], seg["heading_start"], seg["heading_end"], spacing, bins)
+    track = encode_track(xy, spacing, bins, float(seg_conf["tolerance_m"]), float(conf["encoding"]["heading_lookahead_m"]),
+                         float(seg_conf["turn_label_offset_m"]), float(seg_conf["corner_skip_m"]))
     elapsed = time.perf_counter() - started
-    corners, cum = seg["corners"], seg["cum"]
-    # Place of every token along the track, in metres from the start, then its frame and edge.
+    seg, encoded, kind, frame_of = track.segments, track.encoded, track.kind, track.frame
+    corners = seg["corners"]
     straight = straight_token(bins)
-    place = np.empty(len(encoded.tokens))
-    kind = []
-    virtual_index = 0
-    for t, s in enumerate(encoded.segment):
-        start_m = cum[corners[s]]
-        if s > 0 and (t == 0 or encoded.segment[t - 1] != s):  # the first token of segments 1.. is the turn into it
-            place[t] = start_m + min(float(seg_conf["turn_label_offset_m"]), seg["lengths"][s] / 2.0)
-            kind.append("turn")
-            virtual_index = 0
-        else:
-            virtual_index = virtual_index + 1 if t > 0 and encoded.segment[t - 1] == s else 1
-            place[t] = start_m + virtual_index * spacing
-            kind.append("virtual")
-    frame_of = np.clip(np.searchsorted(cum, place), 0, len(xy) - 1)
     tokens = pd.DataFrame({"index": np.arange(len(encoded.tokens)), "token": encoded.tokens, "segment": encoded.segment,
-                           "kind": kind, "frame": frame_of, "edge_id": edge[frame_of],
+                           "kind": kind, "frame": frame_of, "distance_m": track.place_m, "edge_id": edge[frame_of],
                            "x": xy[frame_of, 0], "y": xy[frame_of, 1]})
     segments = pd.DataFrame({"segment": np.arange(len(corners) - 1), "start_frame": corners[:-1], "end_frame": corners[1:],
                              "length_m": seg["lengths"], "heading_start_deg": seg["heading_start"],

@@ -49,10 +49,21 @@ class Noise:
 
 
 class PathEncoder:
-    """Encodes paths of one road graph; per-edge lengths and headings are computed once."""
+    """Encodes paths of one road graph; per-edge lengths and headings are computed once.
 
-    def __init__(self, graph: RoadGraph, bins: int, heading_lookahead_m: float) -> None:
+    With ``segmentation`` (the config slice: ``tolerance_m``, ``corner_skip_m``,
+    ``turn_label_offset_m``), a path is encoded like a test drive instead: its
+    polyline goes through the Douglas-Peucker segmentation of
+    :mod:`topoloc.odometry.segment_trajectory`, so a straight-through
+    intersection yields no token and a bend of a road can, as on real
+    odometry; labels are the edge at each token's place along the path.
+    """
+
+    def __init__(self, graph: RoadGraph, bins: int, heading_lookahead_m: float, segmentation: dict | None = None) -> None:
         self.bins = bins
+        self.graph = graph
+        self.lookahead = heading_lookahead_m
+        self.segmentation = segmentation
         self.spacing = graph.virtual_node_spacing_m
         self.lengths = graph.edges.length_m.to_numpy(dtype=float)
         self.u = graph.edges.u.to_numpy()
@@ -69,6 +80,8 @@ class PathEncoder:
 
     def encode(self, path: GraphPath, rng: np.random.Generator | None = None, noise: Noise = Noise()) -> tuple[np.ndarray, np.ndarray]:
         """Tokens and edge-id labels of ``path``; with ``rng``, jittered by ``noise``."""
+        if self.segmentation is not None:
+            return self._encode_segmented(path, rng, noise)
         edges = np.asarray(path.edges)
         lengths = self.lengths[edges]
         start, end = self.headings(path)
@@ -78,6 +91,29 @@ class PathEncoder:
                 lengths = lengths * np.clip(1.0 + rng.normal(0.0, noise.spacing_rel_std, len(lengths)), 0.1, None)
         drive = encode_segments(lengths, start, end, self.spacing, self.bins)
         return drive.tokens, edges[drive.segment]
+
+
+    def _encode_segmented(self, path: GraphPath, rng: np.random.Generator | None, noise: Noise) -> tuple[np.ndarray, np.ndarray]:
+        from topoloc.odometry.segment_trajectory import segment_track, token_places
+
+        edges = np.asarray(path.edges)
+        pieces = [self.graph.edge_coords(int(edges[0]), path.nodes[0])]
+        pieces += [self.graph.edge_coords(int(e), n)[1:] for e, n in zip(edges[1:], path.nodes[1:-1])]
+        seg_conf = self.segmentation
+        seg = segment_track(np.vstack(pieces), float(seg_conf["tolerance_m"]), self.lookahead,
+                            corner_skip_m=float(seg_conf["corner_skip_m"]))
+        lengths, start, end = seg["lengths"], seg["heading_start"], seg["heading_end"]
+        if rng is not None:
+            start = start + rng.normal(0.0, noise.angle_std_deg, len(start)) if noise.angle_std_deg else start
+            if noise.spacing_rel_std:
+                lengths = lengths * np.clip(1.0 + rng.normal(0.0, noise.spacing_rel_std, len(lengths)), 0.1, None)
+        drive = encode_segments(lengths, start, end, self.spacing, self.bins)
+        # places along the true path: a jittered segment's tokens are spread over its true length
+        scale = seg["lengths"] / np.maximum(lengths, 1e-9)
+        place, _ = token_places(drive, seg["cum"][seg["corners"]], seg["lengths"], self.spacing * scale,
+                                float(seg_conf["turn_label_offset_m"]))
+        ends = np.cumsum(self.lengths[edges])
+        return drive.tokens, edges[np.minimum(np.searchsorted(ends, place, side="right"), len(edges) - 1)]
 
 
 class ShardWriter:
@@ -126,3 +162,37 @@ def load_sequences(path: str | Path, limit: int | None = None) -> tuple[list[np.
     flat_l = labels.flatten().to_numpy().astype(np.int64)
     return ([flat_t[a:b] for a, b in zip(offsets[:-1], offsets[1:])],
             [flat_l[a:b] for a, b in zip(offsets[:-1], offsets[1:])])
+
+
+MAX_OFFSET = 31  # offsets along an edge beyond this share the last class
+
+
+def state_targets(nodes: list[int], edges: list[int], labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-step travel direction and offset along the current edge, the rest of the position a label leaves out.
+
+    Direction is 1 when the edge is travelled towards the higher node id (any
+    fixed orientation of each edge would do); the offset counts the steps
+    since the vehicle entered the edge (0 at the turn onto it), capped at
+    :data:`MAX_OFFSET`. Used as auxiliary training targets.
+    """
+    index = {edge: i for i, edge in enumerate(edges)}
+    labels = np.asarray(labels)
+    step = np.flatnonzero(np.r_[True, labels[1:] != labels[:-1]])  # first step on each edge
+    run = np.repeat(step, np.diff(np.r_[step, len(labels)]))
+    offsets = np.minimum(np.arange(len(labels)) - run, MAX_OFFSET)
+    position = np.array([index[int(edge)] for edge in labels[step]])
+    forward = np.asarray(nodes)[position] < np.asarray(nodes)[position + 1]
+    directions = np.repeat(forward.astype(np.int64), np.diff(np.r_[step, len(labels)]))
+    return directions, offsets.astype(np.int64)
+
+
+def load_state_targets(path: str | Path, limit: int | None = None) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """:func:`state_targets` of (the first ``limit``) rows of a dataset file."""
+    directions, offsets = [], []
+    for count, row in enumerate(iter_rows(path, ("nodes", "edges", "labels"))):
+        if limit is not None and count >= limit:
+            break
+        d, o = state_targets(row["nodes"], row["edges"], np.asarray(row["labels"]))
+        directions.append(d)
+        offsets.append(o)
+    return directions, offsets

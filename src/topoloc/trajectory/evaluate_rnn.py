@@ -4,7 +4,7 @@
 i-th token (virtual nodes included) is the true edge, over the trajectories
 that have an i-th token (``n`` in the table); "last" is each trajectory's
 last token. Computed for the training and the held-out (validation)
-trajectories.
+trajectories, next to the ceiling of any causal model (:func:`prefix_majority`).
 """
 
 from __future__ import annotations
@@ -45,6 +45,34 @@ def accuracy_by_position(predictions: list[np.ndarray], labels: list[np.ndarray]
     return pd.DataFrame(rows)
 
 
+def prefix_majority(reference_tokens: list[np.ndarray], reference_labels: list[np.ndarray],
+                    tokens: list[np.ndarray]) -> list[np.ndarray]:
+    """Best causal guess at every step: the most frequent label among reference paths with the same token prefix.
+
+    A causal model sees only the tokens so far; paths of the map that share a
+    prefix but sit on different edges at its end are indistinguishable to it.
+    Scored with :func:`accuracy_by_position`, these guesses give the ceiling
+    any causal model can reach on ``tokens`` when ``reference`` holds every path.
+    Prefixes absent from the reference get the label -1.
+    """
+    counts: dict[int, dict[int, int]] = {}
+    for seq, lab in zip(reference_tokens, reference_labels):
+        key = 0
+        for token, label in zip(seq.tolist(), lab.tolist()):
+            key = hash((key, token))
+            slot = counts.setdefault(key, {})
+            slot[label] = slot.get(label, 0) + 1
+    best = {key: max(slot, key=lambda label: (slot[label], -label)) for key, slot in counts.items()}
+    guesses = []
+    for seq in tokens:
+        key, row = 0, []
+        for token in seq.tolist():
+            key = hash((key, token))
+            row.append(best.get(key, -1))
+        guesses.append(np.array(row, dtype=np.int64))
+    return guesses
+
+
 def plot_loss(history: pd.DataFrame, path: str, title: str) -> None:
     """Fig. 8a: training loss (per logged step) and validation loss (per epoch) against epochs."""
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -78,6 +106,11 @@ def plot_accuracy(tables: dict[str, pd.DataFrame], path: str, title: str, min_fr
     for name, (keep, total, last) in shown.items():
         line = ax.plot(np.arange(1, len(keep) + 1), keep.accuracy, ".-", label=f"{name} (N={total})")
         ax.plot([cut + 2], [last], "s", color=line[0].get_color())
+        if "ceiling" in keep:
+            ceiling = tables[name].loc[tables[name].position == "last", "ceiling"].iloc[0]
+            ax.plot(np.arange(1, len(keep) + 1), keep.ceiling, "--", lw=0.9, color=line[0].get_color(),
+                    label=f"{name}: best causal guess")
+            ax.plot([cut + 2], [ceiling], "_", ms=14, color=line[0].get_color())
     ticks = list(range(0, cut + 1, max(1, cut // 10)))
     ax.set_xticks([*ticks, cut + 2], [*map(str, ticks), "last"])
     ax.set_xlabel("i-th position in trajectory (virtual nodes included)")
@@ -96,15 +129,19 @@ def markdown_table(tables: dict[str, pd.DataFrame], region: str) -> str:
     """Accuracy per position, one column pair per split."""
     merged = None
     for name, table in tables.items():
-        part = table.rename(columns={"n": f"n {name}", "accuracy": f"accuracy {name}"})
+        part = table.rename(columns={"n": f"n {name}", "accuracy": f"accuracy {name}", "ceiling": f"ceiling {name}"})
         merged = part if merged is None else merged.merge(part, on="position", how="outer", sort=False)
     merged = merged.sort_values("position", key=lambda s: s.map(lambda p: 10**9 if p == "last" else int(p)))
-    lines = [f"# Accuracy at the i-th position ({region})", "", "| " + " | ".join(merged.columns) + " |", "|" + "---|" * len(merged.columns)]
+    lines = [f"# Accuracy at the i-th position ({region})", ""]
+    if any("ceiling" in table for table in tables.values()):
+        lines += ["ceiling: the best any causal model can score (the most frequent edge among all dataset",
+                  "trajectories with the same tokens so far).", ""]
+    lines += ["| " + " | ".join(merged.columns) + " |", "|" + "---|" * len(merged.columns)]
     for _, row in merged.iterrows():
         cells = []
         for col in merged.columns:
             value = row[col]
-            if col.startswith("accuracy"):
+            if col.startswith(("accuracy", "ceiling")):
                 cells.append("" if pd.isna(value) else f"{value:.4f}")
             elif col.startswith("n "):
                 cells.append("" if pd.isna(value) else str(int(value)))
@@ -119,11 +156,16 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     region = conf.get("region", "")
     model = TrajectoryRNN.load_from_checkpoint(inputs["model"], map_location="cpu")
     limit = conf["evaluate"].get("max_train_trajectories")
-    tables = {}
-    for split, limit_split in (("train", limit), ("held-out", None)):
-        tokens, labels = load_sequences(inputs["train" if split == "train" else "val"], limit_split)
-        tables[split] = accuracy_by_position(predict(model, tokens), labels)
-    frame = pd.concat([t.assign(split=name) for name, t in tables.items()])[["split", "position", "n", "accuracy"]]
+    data = {"train": load_sequences(inputs["train"], limit), "held-out": load_sequences(inputs["val"])}
+    tables = {split: accuracy_by_position(predict(model, tokens), labels) for split, (tokens, labels) in data.items()}
+    if conf["evaluate"].get("ceiling", True):
+        reference = load_sequences(inputs["train"]) if limit is not None else data["train"]
+        ref_tokens, ref_labels = reference[0] + data["held-out"][0], reference[1] + data["held-out"][1]
+        for split, (tokens, labels) in data.items():
+            best = accuracy_by_position(prefix_majority(ref_tokens, ref_labels, tokens), labels)
+            tables[split]["ceiling"] = best.accuracy.to_numpy()
+    frame = pd.concat([t.assign(split=name) for name, t in tables.items()])
+    frame = frame[["split", *(c for c in frame.columns if c != "split")]]
     with atomic_path(outputs["csv"]) as tmp:
         frame.to_csv(tmp, index=False)
     write_text(outputs["table"], markdown_table(tables, region))
@@ -136,6 +178,8 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         last = table[table.position == "last"].iloc[0]
         positions = table[table.position != "last"]
         metrics[f"{key}_acc_last"] = float(last.accuracy)
+        if "ceiling" in table:
+            metrics[f"{key}_ceiling_last"] = float(last.ceiling)
         metrics[f"{key}_trajectories"] = float(last.n)
         for i in (1, 5, 10, 20, 40):
             if i <= len(positions):

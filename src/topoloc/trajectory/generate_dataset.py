@@ -44,7 +44,13 @@ def generate(graph: RoadGraph, conf: dict[str, Any], train_path: str, val_path: 
     aug = data.get("augment", {})
     noise = Noise(int(aug.get("copies", 0)), float(aug.get("angle_std_deg", 0.0)), float(aug.get("spacing_rel_std", 0.0)))
     seed = int(data["seed"])
-    encoder = PathEncoder(graph, bins, float(conf["encoding"]["heading_lookahead_m"]))
+    mode = data.get("encoding", "nodes")
+    if mode not in ("nodes", "douglas_peucker"):
+        raise InputError("dataset.encoding", f"must be nodes or douglas_peucker, got {mode!r}")
+    if mode == "douglas_peucker" and "segmentation" not in conf:
+        raise InputError("dataset.encoding", "douglas_peucker needs the segmentation config")
+    encoder = PathEncoder(graph, bins, float(conf["encoding"]["heading_lookahead_m"]),
+                          conf["segmentation"] if mode == "douglas_peucker" else None)
     split_rng = np.random.default_rng([seed, 1])
     noise_rng = np.random.default_rng([seed, 2])
 

@@ -1,5 +1,12 @@
 """The trajectory RNN: angle-token embedding -> one recurrent layer -> edge-class logits per step.
 
+With ``state_loss_weight`` > 0 a second linear head on the same recurrent
+outputs is trained to predict the rest of the vehicle's position at each step
+(travel direction on the edge, steps since entering it): auxiliary targets
+that make the state the network must track explicit. They cost little
+and generalise to unseen trajectories markedly better (README); the head is
+not used for prediction.
+
 Sequences are right-padded with the token ``bins`` (its own embedding row)
 and the label ``IGNORE``. The network is unidirectional, so its outputs at
 real steps never see the padding behind them: packing is not needed for
@@ -8,17 +15,20 @@ correctness, and the per-step cross-entropy ignores the padded steps.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import lightning as L
 import numpy as np
 import torch
 from torch import nn
-from torch.utils.data import DataLoader, Dataset
+from torch.utils.data import DataLoader, Dataset, Sampler
+
+from topoloc.trajectory.dataset import MAX_OFFSET, load_sequences, load_state_targets
 
 IGNORE = -100
 CELLS = {"rnn": nn.RNN, "gru": nn.GRU, "lstm": nn.LSTM}
+SCHEDULES = ("constant", "onecycle", "plateau")
 
 
 class TrajectoryRNN(L.LightningModule):
@@ -34,27 +44,47 @@ class TrajectoryRNN(L.LightningModule):
         optimizer: str = "adam",
         lr: float = 3e-3,
         weight_decay: float = 0.0,
-        plateau_factor: float | None = None,
+        lr_schedule: str = "constant",
+        plateau_factor: float = 0.3,
         plateau_patience: int = 1,
+        warmup_fraction: float = 0.15,
+        state_loss_weight: float = 0.0,
     ) -> None:
         super().__init__()
         if cell not in CELLS:
             raise ValueError(f"cell must be one of {sorted(CELLS)}, got {cell!r}")
+        if lr_schedule not in SCHEDULES:
+            raise ValueError(f"lr_schedule must be one of {SCHEDULES}, got {lr_schedule!r}")
         self.save_hyperparameters()
         self.embedding = nn.Embedding(bins + 1, embedding_dim, padding_idx=bins)
         self.rnn = CELLS[cell](embedding_dim, hidden_size, num_layers=1, batch_first=True)
         self.head = nn.Linear(hidden_size, num_edges)
+        if state_loss_weight > 0:
+            # auxiliary heads (training only): travel direction and offset along the edge
+            self.state_head = nn.Linear(hidden_size, 2 + MAX_OFFSET + 1)
         self.loss = nn.CrossEntropyLoss(ignore_index=IGNORE)
 
     def forward(self, tokens: torch.Tensor) -> torch.Tensor:
         """Logits of shape ``(batch, steps, num_edges)`` for int tokens ``(batch, steps)``."""
-        out, _ = self.rnn(self.embedding(tokens))
-        return self.head(out)
+        return self.head(self.features(tokens))
 
-    def _step(self, batch: tuple[torch.Tensor, torch.Tensor, torch.Tensor], stage: str) -> torch.Tensor:
-        tokens, labels, lengths = batch
-        logits = self(tokens)
-        loss = self.loss(logits.reshape(-1, logits.shape[-1]), labels.reshape(-1))
+    def features(self, tokens: torch.Tensor) -> torch.Tensor:
+        """The recurrent layer's outputs ``(batch, steps, hidden_size)``."""
+        out, _ = self.rnn(self.embedding(tokens))
+        return out
+
+    def _step(self, batch: tuple[torch.Tensor, ...], stage: str) -> torch.Tensor:
+        tokens, labels, lengths, *state = batch
+        features = self.features(tokens)
+        logits = self.head(features)
+        loss = edge_loss = self.loss(logits.reshape(-1, logits.shape[-1]), labels.reshape(-1))
+        if state and self.hparams.state_loss_weight > 0:
+            directions, offsets = state
+            aux = self.state_head(features)
+            state_loss = (self.loss(aux[..., :2].reshape(-1, 2), directions.reshape(-1))
+                          + self.loss(aux[..., 2:].reshape(-1, MAX_OFFSET + 1), offsets.reshape(-1)))
+            loss = edge_loss + self.hparams.state_loss_weight * state_loss
+            self.log(f"{stage}_state_loss", state_loss, on_step=False, on_epoch=True, batch_size=len(lengths))
         with torch.no_grad():
             pred = logits.argmax(-1)
             mask = labels != IGNORE
@@ -62,7 +92,8 @@ class TrajectoryRNN(L.LightningModule):
             rows = torch.arange(len(lengths), device=tokens.device)
             last = (pred[rows, lengths - 1] == labels[rows, lengths - 1]).float().mean()
         on_step = stage == "train"
-        self.log(f"{stage}_loss", loss, prog_bar=True, on_step=on_step, on_epoch=True, batch_size=len(lengths))
+        # the edge cross-entropy: comparable with and without the auxiliary losses
+        self.log(f"{stage}_loss", edge_loss, prog_bar=True, on_step=on_step, on_epoch=True, batch_size=len(lengths))
         self.log(f"{stage}_acc", acc, on_step=False, on_epoch=True, batch_size=len(lengths))
         self.log(f"{stage}_acc_last", last, prog_bar=stage == "val", on_step=False, on_epoch=True, batch_size=len(lengths))
         return loss
@@ -79,62 +110,104 @@ class TrajectoryRNN(L.LightningModule):
             optimizer = torch.optim.SGD(self.parameters(), lr=hp.lr, weight_decay=hp.weight_decay)
         else:
             optimizer = torch.optim.Adam(self.parameters(), lr=hp.lr, weight_decay=hp.weight_decay)
-        if not hp.get("plateau_factor"):
-            return optimizer
-        # multiply the learning rate by plateau_factor when the validation loss stops improving
-        scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(optimizer, factor=hp.plateau_factor, patience=hp.plateau_patience)
-        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "monitor": "val_loss", "interval": "epoch"}}
+        if hp.lr_schedule == "onecycle":
+            # warm up to lr over warmup_fraction of the planned steps, then anneal to ~0 by the last epoch
+            scheduler = torch.optim.lr_scheduler.OneCycleLR(
+                optimizer, max_lr=hp.lr, total_steps=max(2, int(self.trainer.estimated_stepping_batches)),
+                pct_start=hp.warmup_fraction)
+            return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
+        if hp.lr_schedule == "plateau":
+            # multiply the learning rate by plateau_factor when the validation loss stops improving
+            scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(optimizer, factor=hp.plateau_factor, patience=hp.plateau_patience)
+            return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "monitor": "val_loss", "interval": "epoch"}}
+        return optimizer
 
 
 class Sequences(Dataset):
-    """Token and label sequences (numpy int arrays) of one split."""
+    """Token and label sequences (numpy int arrays) of one split, optionally with per-step state targets."""
 
-    def __init__(self, tokens: Sequence[np.ndarray], labels: Sequence[np.ndarray]) -> None:
+    def __init__(self, tokens: Sequence[np.ndarray], labels: Sequence[np.ndarray], *targets: Sequence[np.ndarray]) -> None:
         self.tokens = [torch.as_tensor(t, dtype=torch.long) for t in tokens]
-        self.labels = [torch.as_tensor(lab, dtype=torch.long) for lab in labels]
+        self.columns = [self.tokens] + [[torch.as_tensor(x, dtype=torch.long) for x in column] for column in (labels, *targets)]
 
     def __len__(self) -> int:
         return len(self.tokens)
 
-    def __getitem__(self, index: int) -> tuple[torch.Tensor, torch.Tensor]:
-        return self.tokens[index], self.labels[index]
+    def __getitem__(self, index: int) -> tuple[torch.Tensor, ...]:
+        return tuple(column[index] for column in self.columns)
 
 
-def pad_batch(items: Sequence[tuple[torch.Tensor, torch.Tensor]], pad_token: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Right-pad a batch: tokens with ``pad_token``, labels with :data:`IGNORE`; plus the lengths."""
-    tokens = nn.utils.rnn.pad_sequence([t for t, _ in items], batch_first=True, padding_value=pad_token)
-    labels = nn.utils.rnn.pad_sequence([lab for _, lab in items], batch_first=True, padding_value=IGNORE)
-    lengths = torch.tensor([len(t) for t, _ in items], dtype=torch.long)
-    return tokens, labels, lengths
+class LengthBucketBatches(Sampler[list[int]]):
+    """Shuffled batches of similar-length sequences (less padding, same data per epoch).
+
+    Each pass draws a random order from ``generator``, sorts each window of
+    ``window_batches`` batches by length, cuts it into batches and shuffles
+    the batches: the composition is random but a batch wastes little compute
+    on padding.
+    """
+
+    def __init__(self, lengths: Sequence[int], batch_size: int, generator: torch.Generator, window_batches: int = 50) -> None:
+        self.lengths = torch.as_tensor(list(lengths))
+        self.batch_size, self.generator, self.window = batch_size, generator, batch_size * window_batches
+
+    def __len__(self) -> int:
+        return (len(self.lengths) + self.batch_size - 1) // self.batch_size
+
+    def __iter__(self) -> Iterator[list[int]]:
+        order = torch.randperm(len(self.lengths), generator=self.generator)
+        batches: list[list[int]] = []
+        for start in range(0, len(order), self.window):
+            window = order[start:start + self.window]
+            window = window[torch.argsort(self.lengths[window], stable=True)].tolist()
+            batches += [window[i:i + self.batch_size] for i in range(0, len(window), self.batch_size)]
+        for index in torch.randperm(len(batches), generator=self.generator).tolist():
+            yield batches[index]
+
+
+def pad_batch(items: Sequence[tuple[torch.Tensor, ...]], pad_token: int) -> tuple[torch.Tensor, ...]:
+    """Right-pad a batch: tokens with ``pad_token``, labels (and targets) with :data:`IGNORE`; plus the lengths.
+
+    Returns ``(tokens, labels, lengths, *targets)``.
+    """
+    columns = list(zip(*items))
+    tokens = nn.utils.rnn.pad_sequence(list(columns[0]), batch_first=True, padding_value=pad_token)
+    rest = [nn.utils.rnn.pad_sequence(list(column), batch_first=True, padding_value=IGNORE) for column in columns[1:]]
+    lengths = torch.tensor([len(t) for t in columns[0]], dtype=torch.long)
+    return tokens, rest[0], lengths, *rest[1:]
 
 
 class TrajectoryData(L.LightningDataModule):
     """Train and validation sequences from the dataset stage's Parquet files."""
 
-    def __init__(self, train_path: str, val_path: str, bins: int, batch_size: int, seed: int = 0, num_workers: int = 0) -> None:
+    def __init__(self, train_path: str, val_path: str, bins: int, batch_size: int, seed: int = 0,
+                 bucket_by_length: bool = True, state_targets: bool = False, num_workers: int = 0) -> None:
         super().__init__()
-        self.train_path, self.val_path = train_path, val_path
+        self.train_path, self.val_path, self.bucket_by_length = train_path, val_path, bucket_by_length
+        self.state_targets = state_targets
         self.bins, self.batch_size, self.seed, self.num_workers = bins, batch_size, seed, num_workers
         self.train: Sequences | None = None
         self.val: Sequences | None = None
 
     def setup(self, stage: str | None = None) -> None:
-        from topoloc.trajectory.dataset import load_sequences
-
         if self.train is None:
-            self.train = Sequences(*load_sequences(self.train_path))
-            self.val = Sequences(*load_sequences(self.val_path))
+            extra = (lambda path: load_state_targets(path)) if self.state_targets else (lambda path: ())
+            self.train = Sequences(*load_sequences(self.train_path), *extra(self.train_path))
+            self.val = Sequences(*load_sequences(self.val_path), *extra(self.val_path))
 
-    def _loader(self, data: Sequences, shuffle: bool, batch_size: int) -> DataLoader:
-        generator = torch.Generator().manual_seed(self.seed)
-        return DataLoader(data, batch_size=batch_size, shuffle=shuffle, generator=generator,
-                          collate_fn=lambda items: pad_batch(items, self.bins), num_workers=self.num_workers)
+    def _collate(self, items: Sequence[tuple[torch.Tensor, ...]]) -> tuple[torch.Tensor, ...]:
+        return pad_batch(items, self.bins)
 
     def train_dataloader(self) -> DataLoader:
-        return self._loader(self.train, True, self.batch_size)
+        generator = torch.Generator().manual_seed(self.seed)
+        if self.bucket_by_length:
+            sampler = LengthBucketBatches([len(t) for t in self.train.tokens], self.batch_size, generator)
+            return DataLoader(self.train, batch_sampler=sampler, collate_fn=self._collate, num_workers=self.num_workers)
+        return DataLoader(self.train, batch_size=self.batch_size, shuffle=True, generator=generator,
+                          collate_fn=self._collate, num_workers=self.num_workers)
 
     def val_dataloader(self) -> DataLoader:
-        return self._loader(self.val, False, max(self.batch_size, 256))
+        return DataLoader(self.val, batch_size=max(self.batch_size, 256), shuffle=False, collate_fn=self._collate,
+                          num_workers=self.num_workers)
 
 
 @torch.no_grad()

@@ -65,8 +65,11 @@ def build_model(conf: dict[str, Any], num_edges: int) -> TrajectoryRNN:
         optimizer=train["optimizer"],
         lr=float(train["lr"]),
         weight_decay=float(train.get("weight_decay", 0.0)),
-        plateau_factor=train.get("lr_plateau_factor"),
+        lr_schedule=train.get("lr_schedule", "constant"),
+        plateau_factor=float(train.get("lr_plateau_factor", 0.3)),
         plateau_patience=int(train.get("lr_plateau_patience", 1)),
+        warmup_fraction=float(train.get("warmup_fraction", 0.15)),
+        state_loss_weight=float(train.get("state_loss_weight", 0.0)),
     )
 
 
@@ -76,7 +79,9 @@ def fit(conf: dict[str, Any], train_path: str, val_path: str, num_edges: int, mo
     train = conf["train"]
     L.seed_everything(int(train["seed"]), workers=True, verbose=False)
     bins = check_encoding(conf["encoding"])
-    data = TrajectoryData(train_path, val_path, bins, int(train["batch_size"]), int(train["seed"]))
+    data = TrajectoryData(train_path, val_path, bins, int(train["batch_size"]), int(train["seed"]),
+                          bucket_by_length=bool(train.get("bucket_by_length", True)),
+                          state_targets=float(train.get("state_loss_weight", 0.0)) > 0)
     data.setup()
     if len(data.train) == 0:
         raise InputError(train_path, "empty training set (dataset stage produced no training paths)")

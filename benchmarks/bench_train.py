@@ -1,0 +1,78 @@
+"""Training benchmark: held-out last-position accuracy of the trajectory RNN against wall time.
+
+Usage (after `snakemake all` built the dataset of the config)::
+
+    PYTHONPATH=src python benchmarks/bench_train.py [--configfile config/config.yaml] [--region helsinki]
+        [--set train.max_epochs=20 model.cell=gru ...]
+
+Trains with the config's ``model`` and ``train`` sections (as the ``train_rnn`` stage does, without
+MLflow) on ``results/{region}/dataset``, then prints the wall time, epochs, the last-position accuracy
+on training and held-out trajectories (the paper's Eq. 6) and the ceiling of any causal model. The
+issue's target: >= 0.95 held-out last-position accuracy within 5 minutes on a 2-core CPU.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+
+def parse_value(text: str) -> object:
+    """``--set`` values are YAML scalars: 20 -> int, 0.01 -> float, gru -> str, null -> None."""
+    return yaml.safe_load(text)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--configfile", default="config/config.yaml")
+    parser.add_argument("--region", default=None, help="results/{region}/dataset (default: region.name of the config)")
+    parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE", help="override config keys")
+    args = parser.parse_args()
+
+    import torch
+
+    from topoloc.trajectory.dataset import load_sequences
+    from topoloc.trajectory.evaluate_rnn import accuracy_by_position, prefix_majority
+    from topoloc.trajectory.model import predict
+    from topoloc.trajectory.train_rnn import fit
+
+    config = yaml.safe_load(Path(args.configfile).read_text())
+    for item in args.set:
+        key, value = item.split("=", 1)
+        section, name = key.split(".", 1)
+        config[section][name] = parse_value(value)
+    region = args.region or config["region"]["name"]
+    data = Path("results") / region / "dataset"
+    stats = json.loads((data / "stats.json").read_text())
+    conf = {"encoding": config["encoding"], "model": config["model"], "train": config["train"]}
+
+    with tempfile.TemporaryDirectory() as tmp:
+        started = time.perf_counter()
+        model, history, metrics = fit(conf, str(data / "train.parquet"), str(data / "val.parquet"), int(stats["classes"]),
+                                      f"{tmp}/model.ckpt")
+        wall = time.perf_counter() - started
+    train_tokens, train_labels = load_sequences(data / "train.parquet")
+    val_tokens, val_labels = load_sequences(data / "val.parquet")
+    everything = (train_tokens + val_tokens, train_labels + val_labels)
+    rows = {}
+    for split, (tokens, labels) in {"train": (train_tokens, train_labels), "held-out": (val_tokens, val_labels)}.items():
+        last = accuracy_by_position(predict(model, tokens), labels).set_index("position").loc["last", "accuracy"]
+        ceiling = accuracy_by_position(prefix_majority(*everything, tokens), labels).set_index("position").loc["last", "accuracy"]
+        rows[split] = (last, ceiling)
+    print(f"region {region}: cell {conf['model']['cell']}, {torch.get_num_threads()} threads, "
+          f"{metrics['train_size']:.0f} train / {metrics['val_size']:.0f} held-out trajectories")
+    print(f"training wall time {wall:.1f} s (fit {metrics['train_seconds']:.1f} s), epochs {metrics['epochs']:.0f}, "
+          f"steps {metrics['steps']:.0f}")
+    print("| split | last-position accuracy | ceiling (best causal guess) |")
+    print("|---|---|---|")
+    for split, (last, ceiling) in rows.items():
+        print(f"| {split} | {last:.4f} | {ceiling:.4f} |")
+
+
+if __name__ == "__main__":
+    main()

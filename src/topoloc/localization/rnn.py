@@ -1,0 +1,93 @@
+"""Running the trained trajectory RNN over a drive of any length, and loading it.
+
+The RNN is trained on paths of ``dataset.path_nodes`` map nodes (tens of
+tokens); a real drive has hundreds. With ``window`` set, the drive is cut into
+windows of ``window`` tokens that start every ``stride`` tokens (the RNN
+restarts in each, so its state never runs past the lengths it was trained
+on), all run in one batch; step ``t`` takes its output from the oldest window
+that covers it, i.e. with between ``window - stride + 1`` and ``window``
+tokens of context. ``window: null`` runs one pass over the whole drive.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from topoloc.errors import InputError
+
+
+def window_plan(steps: int, window: int | None, stride: int | None) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Window start tokens, and per step the index of the window it is read from."""
+    if window is None or steps <= window:
+        return np.zeros(1, np.int64), np.zeros(steps, np.int64)
+    stride = window if stride is None else stride
+    if not 1 <= stride <= window:
+        raise InputError("localization.rnn.stride", f"must be between 1 and rnn.window ({window}), got {stride}")
+    t = np.arange(steps)
+    first = np.maximum(0, -(-(t - window + 1) // stride))  # oldest window start s = i * stride with s > t - window
+    return np.arange(first.max() + 1, dtype=np.int64) * stride, first
+
+
+def edge_log_probs(model: Any, tokens: NDArray[np.int64], window: int | None = None, stride: int | None = None) -> NDArray[np.float32]:
+    """``(T, E)`` log-probabilities of the edge classes at every token of one drive."""
+    import torch
+
+    tokens = np.asarray(tokens, dtype=np.int64)
+    steps = len(tokens)
+    if steps == 0:
+        raise ValueError("no tokens")
+    starts, which = window_plan(steps, window, stride)
+    length = steps if len(starts) == 1 else int(window)
+    pad = int(model.hparams.bins) if hasattr(model, "hparams") else int(tokens.max())
+    batch = np.full((len(starts), length), pad, dtype=np.int64)
+    for row, start in enumerate(starts):
+        piece = tokens[start:start + length]
+        batch[row, :len(piece)] = piece
+    model.eval()
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # a few small windows: one thread is fastest, and never waits on a busy core
+    try:
+        with torch.inference_mode():
+            logp = torch.log_softmax(model(torch.as_tensor(batch)).float(), dim=-1).numpy()
+    finally:
+        torch.set_num_threads(threads)
+    t = np.arange(steps)
+    return logp[which, t - starts[which]]
+
+
+def load_model(spec: str, tracking_uri: str | None = None) -> Any:
+    """The trajectory RNN from a ``.ckpt`` path, an MLflow model URI (``runs:/<id>/model``) or a bare run id.
+
+    An unknown file, run id or URI raises :class:`InputError` naming it.
+    """
+    path = Path(spec)
+    if path.suffix == ".ckpt" or path.exists():
+        if not path.is_file():
+            raise InputError(spec, "model checkpoint not found")
+        from topoloc.trajectory.model import TrajectoryRNN
+
+        try:
+            return TrajectoryRNN.load_from_checkpoint(str(path), map_location="cpu").eval()
+        except Exception as err:  # torch and Lightning raise many kinds
+            raise InputError(spec, f"not a trajectory RNN checkpoint ({type(err).__name__}: {str(err).splitlines()[0][:120]})") from err
+    uri = spec if "://" in spec or spec.startswith(("runs:/", "models:/")) else f"runs:/{spec}/model"
+    import mlflow
+
+    from topoloc.tracking import tracking_uri as default_uri
+
+    store = tracking_uri or default_uri()
+    if store.startswith("sqlite:///"):
+        db = Path(store[len("sqlite:///"):].split("?")[0])
+        if not db.is_file():
+            raise InputError(spec, f"no MLflow store at {db} to look up the run id in (set --tracking-uri or MLFLOW_TRACKING_URI)")
+    mlflow.set_tracking_uri(store)
+    try:
+        model = mlflow.pytorch.load_model(uri, map_location="cpu")
+    except Exception as err:  # MlflowException and OSError for unknown runs, models and artifacts
+        first = str(err).splitlines()[0][:160] if str(err) else type(err).__name__
+        raise InputError(spec, f"no trajectory model at {uri} in the MLflow store {store.split('?')[0]} ({first})") from err
+    return model.eval()

@@ -1,0 +1,42 @@
+"""The HMM baseline recovers a noiseless route on a small grid-like map."""
+
+from __future__ import annotations
+
+import numpy as np
+from localization_helpers import irregular_grid
+
+from topoloc.localization.connectivity import consecutive_connected, directed_edges
+from topoloc.localization.hmm import CellHMM, HmmParams
+from topoloc.localization.metrics import drive_metrics
+from topoloc.trajectory.dataset import PathEncoder
+from topoloc.trajectory.paths import Path
+
+
+def route_tokens(graph, edges, nodes):
+    index = {frozenset(e): k for k, e in enumerate(edges)}
+    path = Path(tuple(nodes), tuple(index[frozenset((a, b))] for a, b in zip(nodes[:-1], nodes[1:])))
+    return PathEncoder(graph, 20, 10.0).encode(path)
+
+
+def test_hmm_recovers_a_noiseless_route_on_a_grid():
+    graph, edges = irregular_grid()
+    tokens, labels = route_tokens(graph, edges, [0, 1, 6, 7, 8, 13, 14, 9, 4])
+    states = directed_edges(graph)
+    hmm = CellHMM(graph, states, 20, HmmParams())
+    dec = hmm.decode(tokens)
+    assert dec.path.tolist() == labels.tolist()  # the Viterbi path is the route, from the first step
+    assert consecutive_connected(states, dec.path).all()
+    distance = 20.0 * np.arange(len(tokens))
+    m = drive_metrics(labels, dec.online, dec.path, distance, states, confirm_m=100.0)
+    assert m["localized_m"] < 0.7 * distance[-1] and m["accuracy_after"] == 1.0  # online: sure before the end
+    assert dec.confidence[-1] > 0.5 and np.isfinite(dec.extra["log_evidence"])
+
+
+def test_hmm_mass_stays_on_the_allowed_direction():
+    graph, edges = irregular_grid()
+    states = directed_edges(graph)
+    hmm = CellHMM(graph, states, 20, HmmParams(cell_m=5.0))
+    assert hmm.num_cells >= 2 * graph.edges.length_m.sum() / 5.0 - 1e-6
+    # moves never lead off the map, and probabilities of one token from one cell sum to at most one
+    straight = np.bincount(hmm.src, weights=hmm.weights.sum(axis=0), minlength=hmm.num_cells)
+    assert (straight <= 1.0 + 1e-5).all() and (straight > 0.5).all()

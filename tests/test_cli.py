@@ -1,0 +1,162 @@
+"""``topoloc localize``: a round trip on a small map, and one-line errors for bad input."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyproj
+import pytest
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / "localization"))
+sys.path.insert(0, str(Path(__file__).resolve().parent / "trajectory"))
+
+from localization_helpers import irregular_grid  # noqa: E402
+
+from topoloc.cli import DEFAULTS, main  # noqa: E402
+from topoloc.odometry.poses import poses_from_planar, write_poses  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+ROUTE = [0, 1, 6, 7, 8, 13, 14, 9, 4]
+
+
+def route_track(graph, nodes, step=1.0):
+    """Points every ``step`` metres along the straight roads between ``nodes``."""
+    pts = []
+    for a, b in zip(nodes[:-1], nodes[1:]):
+        p, q = graph.nodes.loc[a, ["x", "y"]].to_numpy(float), graph.nodes.loc[b, ["x", "y"]].to_numpy(float)
+        n = int(np.hypot(*(q - p)) / step)
+        pts.append(p + (q - p) * np.arange(n)[:, None] / n)
+    pts.append(graph.nodes.loc[[nodes[-1]], ["x", "y"]].to_numpy(float))
+    return np.vstack(pts)
+
+
+@pytest.fixture(scope="module")
+def small_map(tmp_path_factory):
+    """A grid map, a model trained for one fast_dev_run step on it, and a drive along ROUTE with its GPS."""
+    from topoloc.trajectory.generate_dataset import generate
+    from topoloc.trajectory.train_rnn import fit
+    from test_train import confs
+
+    tmp = tmp_path_factory.mktemp("cli")
+    graph, edges = irregular_grid()
+    graph.nodes["lat"], graph.nodes["lon"] = 60.0, 25.0
+    graph.save_graphml(tmp / "graph.graphml")
+    conf = confs()
+    generate(graph, conf, str(tmp / "train.parquet"), str(tmp / "val.parquet"))
+    fit(conf, str(tmp / "train.parquet"), str(tmp / "val.parquet"), graph.num_edges, str(tmp / "model.ckpt"), fast_dev_run=True)
+    xy = route_track(graph, ROUTE) + [385000.0, 6670000.0]  # the grid placed in Helsinki, in EPSG:3067
+    graph.nodes["x"] += 385000.0
+    graph.nodes["y"] += 6670000.0
+    graph.geometry = [g + [385000.0, 6670000.0] for g in graph.geometry]
+    graph.save_graphml(tmp / "graph.graphml")
+    heading = np.arctan2(*np.diff(xy[:2], axis=0)[0][::-1])
+    yaw = np.full(len(xy), heading)
+    local = xy - xy[0]
+    write_poses(tmp / "poses.txt", poses_from_planar(local, yaw))
+    lon, lat = pyproj.Transformer.from_crs("EPSG:3067", "EPSG:4326", always_xy=True).transform(xy[:, 0], xy[:, 1])
+    pd.DataFrame({"frame": np.arange(len(xy)), "lat": lat, "lon": lon}).to_csv(tmp / "gps.csv", index=False)
+    index = {frozenset(e): k for k, e in enumerate(edges)}
+    route_edges = [index[frozenset((a, b))] for a, b in zip(ROUTE[:-1], ROUTE[1:])]
+    return tmp, route_edges
+
+
+def run_cli(capsys, *args):
+    code = main(["localize", *map(str, args)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_round_trip_writes_csv_and_geojson(small_map, capsys):
+    tmp, route_edges = small_map
+    code, out, err = run_cli(capsys, "--model", tmp / "model.ckpt", "--graph", tmp / "graph.graphml", "--poses", tmp / "poses.txt",
+                             "--gps", tmp / "gps.csv", "--out", tmp / "drive", "--decoder", "hmm")
+    assert code == 0, err
+    assert out.startswith("topoloc localize: ") and "drive.geojson" in out
+    table = pd.read_csv(tmp / "drive.csv")
+    assert len(table) > 40 and {"token", "distance_m", "strategy1_path", "strategy2_path", "hmm_path", "raw_online"} <= set(table.columns)
+    # the map explains this noiseless drive: the baseline's decoded sequence follows the route, in order
+    runs = [e for i, e in enumerate(table.hmm_path) if i == 0 or e != table.hmm_path[i - 1]]
+    assert runs == route_edges
+    geo = json.loads((tmp / "drive.geojson").read_text())
+    decoded = [f for f in geo["features"] if f["properties"]["kind"] == "decoded_edge"]
+    assert [f["properties"]["edge_id"] for f in decoded] == route_edges
+    lon, lat = np.array(decoded[0]["geometry"]["coordinates"]).T
+    assert np.all(np.abs(lat - 60.17) < 0.05) and np.all(np.abs(lon - 24.94) < 0.1)  # WGS84, in Helsinki
+    assert any(f["properties"]["kind"] == "track" for f in geo["features"])
+
+    # without a georeference: the same tokens and answers (the map explains the drive's turns), no track
+    code, out, err = run_cli(capsys, "--model", tmp / "model.ckpt", "--graph", tmp / "graph.graphml", "--poses", tmp / "poses.txt",
+                             "--out", tmp / "plain", "--k", "3")
+    assert code == 0, err
+    plain = pd.read_csv(tmp / "plain.csv")
+    assert plain.token.tolist() == table.token.tolist() and plain.hmm_path.tolist() == table.hmm_path.tolist()
+    assert not any(f["properties"]["kind"] == "track" for f in json.loads((tmp / "plain.geojson").read_text())["features"])
+
+@pytest.mark.parametrize("case", ["unknown_run", "no_store", "missing_ckpt", "empty_poses", "standstill", "other_map", "other_map_no_georef",
+                                  "bad_decoder"])
+def test_bad_input_is_one_line(small_map, capsys, case, tmp_path):
+    tmp, _ = small_map
+    args = {"--model": tmp / "model.ckpt", "--graph": tmp / "graph.graphml", "--poses": tmp / "poses.txt", "--out": tmp_path / "x"}
+    extra: list[str] = []
+    expected = ""
+    if case == "unknown_run":
+        from mlflow import MlflowClient
+
+        MlflowClient(f"sqlite:///{tmp_path / 'mlflow.db'}").search_experiments()  # an existing store without that run
+        capsys.readouterr()
+        args["--model"] = "0123456789abcdef0123456789abcdef"
+        extra = ["--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}"]
+        expected = "topoloc: 0123456789abcdef0123456789abcdef: no trajectory model at runs:/0123456789abcdef0123456789abcdef/model"
+    elif case == "no_store":
+        args["--model"] = "runs:/0123456789abcdef0123456789abcdef/model"
+        extra = ["--tracking-uri", f"sqlite:///{tmp_path / 'none.db'}"]
+        expected = f"topoloc: runs:/0123456789abcdef0123456789abcdef/model: no MLflow store at {tmp_path / 'none.db'}"
+    elif case == "missing_ckpt":
+        args["--model"] = tmp_path / "nothing.ckpt"
+        expected = f"topoloc: {tmp_path / 'nothing.ckpt'}: model checkpoint not found"
+    elif case == "empty_poses":
+        (tmp_path / "empty.txt").write_text("")
+        args["--poses"] = tmp_path / "empty.txt"
+        expected = f"topoloc: {tmp_path / 'empty.txt'}: poses file is empty"
+    elif case == "standstill":
+        write_poses(tmp_path / "still.txt", poses_from_planar(np.zeros((50, 2)) + np.linspace(0, 5, 50)[:, None] * [1, 0], np.zeros(50)))
+        args["--poses"] = tmp_path / "still.txt"
+        expected = f"topoloc: {tmp_path / 'still.txt'}: empty trajectory: the drive covers 5.0 m, less than one virtual-node spacing"
+    elif case == "other_map":
+        gps = pd.read_csv(tmp / "gps.csv")
+        gps["lat"] += 0.5  # the same drive 55 km further north: nothing of this map is there
+        gps.to_csv(tmp_path / "gps.csv", index=False)
+        extra = ["--gps", str(tmp_path / "gps.csv")]
+        expected = f"topoloc: {tmp / 'poses.txt'}: the georeferenced track lies"
+    elif case == "other_map_no_georef":
+        # a zigzag of 60 degree turns every 45 m: this grid map has no such turns
+        headings = np.radians(np.repeat(np.where(np.arange(12) % 2 == 0, 30.0, -30.0), 45))
+        xy = np.cumsum(np.column_stack([np.cos(headings), np.sin(headings)]), axis=0)
+        write_poses(tmp_path / "zigzag.txt", poses_from_planar(xy, headings))
+        args["--poses"] = tmp_path / "zigzag.txt"
+        expected = f"topoloc: {tmp_path / 'zigzag.txt'}: nothing matches: the map turns where the drive does at only"
+    elif case == "bad_decoder":
+        extra = ["--decoder", "hmm", "--no-hmm"]
+        expected = "topoloc: --decoder: 'hmm' is not run"
+    code, out, err = run_cli(capsys, *[x for kv in args.items() for x in map(str, kv)], *extra)
+    assert code == 1
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(expected), err
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_cli_defaults_are_the_schema_defaults():
+    schema = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
+
+    def defaults(node):
+        return {k: defaults(v) if "properties" in v else v.get("default") for k, v in node["properties"].items()}
+
+    every = defaults(schema)
+    for section in ("segmentation", "encoding", "localization"):
+        for key, value in DEFAULTS[section].items():
+            assert every[section][key] == value, f"{section}.{key}"
