@@ -7,7 +7,8 @@ import pytest
 
 from topoloc.errors import InputError
 from topoloc.place.localize import (MATCH, NO_MATCH, ODOMETRY, RELOC_FAIL, RELOC_OK, CorrelationScorer,
-                                    LocalizeSettings, correlation_descriptors, localize, nearest_vertex)
+                                    LocalizeSettings, correlation_descriptors, localize, nearest_vertex,
+                                    nearest_vertices)
 
 M = 200  # vertices 1 m apart
 VERTEX_S = np.arange(M, dtype=float)
@@ -97,6 +98,43 @@ def test_search_at_a_fixed_rate():
     assert np.isnan(trace.score[1]) and trace.score[3] == pytest.approx(0.9)
 
 
+class FalsePeak:
+    """Frame t is at vertex t (score 0.9 there, 0.1 elsewhere), except frame ``bad``, whose peak (0.99) is at
+    vertex ``bad + 10`` (a look-alike place ten metres on) while it scores 0.5 at its true vertex."""
+
+    def __init__(self, bad: int) -> None:
+        self.bad = bad
+
+    def __call__(self, t: int, idx: np.ndarray) -> np.ndarray:
+        scores = np.full(len(idx), 0.1)
+        if t == self.bad:
+            scores[idx == t] = 0.5
+            scores[idx == t + 10] = 0.99
+        else:
+            scores[idx == t] = 0.9
+        return scores
+
+
+def test_sequence_scoring_rejects_a_single_false_peak():
+    ds = np.ones(30)
+    single = localize(VERTEX_S, ds, FalsePeak(20), LocalizeSettings(window=15, sequence_frames=1))
+    assert single.event[20] == MATCH and single.vertex[20] == 30  # the paper's search jumps to the look-alike
+    seq = localize(VERTEX_S, ds, FalsePeak(20), LocalizeSettings(window=15, sequence_frames=3))
+    # the candidate 30 scores (0.99 + 0.1 + 0.1) / 3 with frames 19 and 18 behind it; the truth (0.5 + 0.9 + 0.9) / 3,
+    # the best but under the threshold: no jump, odometry keeps the estimate at the truth
+    assert seq.event[20] == NO_MATCH and seq.vertex[20] == 20 and seq.score[20] == pytest.approx(2.3 / 3)
+    assert list(seq.vertex) == list(range(30))
+    assert seq.event[20:23] == [NO_MATCH] * 3 and seq.count(MATCH) == 27  # frames 21, 22 still see frame 20
+    # the first frames use the frames that exist (frame 0 alone, frame 1 with frame 0)
+    assert seq.score[0] == pytest.approx(0.9) and seq.score[1] == pytest.approx(0.9)
+
+
+def test_nearest_vertices_matches_nearest_vertex():
+    vertex_s = np.array([0.0, 0.7, 2.0, 2.1, 5.0])
+    s = np.array([-1.0, 0.0, 0.35, 0.36, 1.9, 2.06, 4.0, 9.0])
+    assert list(nearest_vertices(vertex_s, s)) == [nearest_vertex(vertex_s, v) for v in s]
+
+
 def test_correlation_baseline_scores():
     rng = np.random.default_rng(0)
     images = rng.integers(0, 255, (4, 48, 160, 3), dtype=np.uint8)
@@ -110,6 +148,8 @@ def test_correlation_baseline_scores():
 def test_bad_settings_name_the_key():
     with pytest.raises(InputError, match=r"^place.localize.window: "):
         LocalizeSettings(window=0)
+    with pytest.raises(InputError, match=r"^place.localize.sequence_frames: "):
+        LocalizeSettings(sequence_frames=0)
     with pytest.raises(InputError, match=r"^place.localize.reloc_span: "):
         LocalizeSettings(reloc_span=-1)
     with pytest.raises(InputError, match=r"^map: "):

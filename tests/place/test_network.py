@@ -9,7 +9,7 @@ import torch
 from torch.utils.data import DataLoader, TensorDataset
 
 from tests.place.conftest import place_conf
-from topoloc.place.network import SiameseNet, augment, local_normalize
+from topoloc.place.network import SiameseNet, augment, box_mean, local_normalize
 from topoloc.place.train_retrieval import build_model
 
 
@@ -31,6 +31,10 @@ def test_forward_embed_and_score_agree():
     assert emb.shape == (6, 16) and np.allclose(np.linalg.norm(emb, axis=1), 4.0, atol=1e-4)
     scores = [model.same_place(emb[k], emb[3 + k:4 + k])[0] for k in range(3)]
     assert np.allclose(scores, probs[:, 1], atol=1e-5)
+    # the score matrix of all queries against all references is same_place row by row
+    matrix = model.score_matrix(emb[:4], emb, chunk=3)
+    assert matrix.shape == (4, 6)
+    assert np.allclose(matrix, [model.same_place(q, emb) for q in emb[:4]], atol=1e-5)
     # the head starts as an L1 distance: an image against itself scores sigmoid(4)
     assert model.same_place(emb[0], emb[:1])[0] == pytest.approx(1 / (1 + np.exp(-4.0)), abs=1e-5)
     # brightness and contrast changes are (nearly) normalised away before the backbone
@@ -40,6 +44,14 @@ def test_forward_embed_and_score_agree():
     assert corr > 0.98
     aug = augment(x.repeat(4, 1, 1, 1), torch.Generator().manual_seed(0))
     assert aug.shape == (4, 3, 48, 64) and aug.min() >= 0 and aug.max() <= 255
+
+
+def test_box_mean_is_the_replicate_padded_average_pool():
+    x = torch.rand(2, 3, 20, 30) * 255
+    for size in (3, 9):
+        pad = size // 2
+        reference = torch.nn.functional.avg_pool2d(torch.nn.functional.pad(x, (pad,) * 4, mode="replicate"), size, 1)
+        assert torch.allclose(box_mean(x, size), reference, atol=1e-3)
 
 
 def test_local_weights_are_loaded(tmp_path):

@@ -13,6 +13,7 @@ from tests.place.conftest import place_conf, render_conf
 from topoloc.errors import InputError
 from topoloc.place import build_topometric_map, localize_repeat, render_places, train_retrieval
 from topoloc.place.images import PlaceSet, polyline_distance, route_path
+from topoloc.place.localize_repeat import METHODS
 from topoloc.graph.road_graph import RoadGraph
 
 
@@ -85,8 +86,9 @@ def test_map_and_localization_outputs(stages):
     assert stats["vertices"] == len(teach) and stats["embed_images_per_s"] > 0
     frames = pd.read_csv(stages["loc"]["frames"])
     repeat = PlaceSet.load(stages["repeat"]["places"])
-    assert len(frames) == 3 * 5 * len(repeat)
-    assert set(frames.method) == {"siamese network", "raw correlation", "odometry only"}
+    assert len(frames) == len(METHODS) * 5 * len(repeat)
+    assert set(frames.method) == {"siamese network", "siamese network + filter", "raw correlation",
+                                  "raw correlation + filter", "odometry only"}
     summary = pd.read_csv(stages["loc"]["summary"])
     assert np.all((summary.within_2m <= summary.within_5m) & (summary.within_5m <= 1.0))
     table = Path(stages["loc"]["table"]).read_text()
@@ -96,6 +98,7 @@ def test_map_and_localization_outputs(stages):
         ("siamese network", "fog"), "within_5m"], abs=1e-4)
     fog = frames[(frames.method == "siamese network") & (frames.condition == "fog")]
     assert metrics["network_within_5m_fog"] == pytest.approx(np.mean(fog.error_m <= 5.0), abs=1e-3)
+    assert {"network_filter_within_5m_min", "correlation_filter_within_2m_night"} <= set(metrics)
 
 
 def test_bad_inputs_name_the_key(town, tmp_path):

@@ -68,6 +68,7 @@ rule train_retrieval:
         "results/{region}/logs/train_retrieval.log",
     benchmark:
         "results/{region}/benchmarks/train_retrieval.tsv"
+    threads: config["place"]["threads"]
     script:
         "../scripts/train_retrieval.py"
 
@@ -96,6 +97,7 @@ rule build_topometric_map:
         "results/{region}/logs/build_topometric_map.log",
     benchmark:
         "results/{region}/benchmarks/build_topometric_map.tsv"
+    threads: config["place"]["threads"]
     script:
         "../scripts/build_topometric_map.py"
 
@@ -137,5 +139,6 @@ rule localize_repeat:
         "results/{region}/logs/localize_repeat.log",
     benchmark:
         "results/{region}/benchmarks/localize_repeat.tsv"
+    threads: config["place"]["threads"]
     script:
         "../scripts/localize_repeat.py"

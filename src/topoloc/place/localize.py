@@ -15,8 +15,15 @@ starts at vertex 0 (teach and repeat start at the same place). Per repeat frame 
    score exceeds ``threshold`` (paper: 0.8) the estimate jumps to that vertex (the retrieved pose), else
    the integrated value stands.
 
+Beyond the paper, ``sequence_frames`` > 1 scores a window candidate by a short sequence instead of one image
+(as SeqSLAM does): the mean score of frames ``t, t-1, ..., t-sequence_frames+1`` against the vertices that
+the repeat's odometry puts behind the candidate (at its arc length minus the distance driven since that
+frame). One bright false match rarely lines up with its neighbours; the true vertex does. Relocalization
+is unchanged. ``sequence_frames: 1`` is the paper's single-image search.
+
 A *scorer* maps (frame, vertex indices) to scores; the network (probability of "same place") and the
-raw-correlation baseline are both scorers, and so is the hand-made one of the tests.
+raw-correlation baseline are both scorers, and so is the hand-made one of the tests. The Bayes filter of
+:mod:`topoloc.place.markov` is the other way to localize with the same scores.
 """
 
 from __future__ import annotations
@@ -45,9 +52,10 @@ class LocalizeSettings:
     lost_frames: int = 30
     reloc_images: int = 5
     reloc_span: int = 30
+    sequence_frames: int = 1
 
     def __post_init__(self) -> None:
-        for key in ("window", "search_every", "lost_frames", "reloc_images"):
+        for key in ("window", "search_every", "lost_frames", "reloc_images", "sequence_frames"):
             if int(getattr(self, key)) < 1:
                 raise InputError(f"place.localize.{key}", f"must be at least 1, got {getattr(self, key)}")
         if int(self.reloc_span) < 0:
@@ -79,6 +87,15 @@ def nearest_vertex(vertex_s: NDArray[np.float64], s: float) -> int:
     return i if vertex_s[i] - s < s - vertex_s[i - 1] else i - 1
 
 
+def nearest_vertices(vertex_s: NDArray[np.float64], s: NDArray[np.float64]) -> NDArray[np.int64]:
+    """:func:`nearest_vertex` of every arc length in ``s``."""
+    i = np.clip(np.searchsorted(vertex_s, s), 1, max(1, len(vertex_s) - 1))
+    if len(vertex_s) == 1:
+        return np.zeros(len(s), np.int64)
+    before = s - vertex_s[i - 1] <= vertex_s[i] - s
+    return np.where(before, i - 1, i).astype(np.int64)
+
+
 def localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], score: ScoreFn,
              settings: LocalizeSettings = LocalizeSettings()) -> Trace:
     """Run the loop of the module docstring over ``len(ds)`` repeat frames (``ds[0]`` is ignored)."""
@@ -89,6 +106,7 @@ def localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], score: Scor
         raise InputError("map", "vertex arc lengths must be non-decreasing")
     n, m = len(ds), len(vertex_s)
     everything = np.arange(m, dtype=np.int64)
+    driven = np.concatenate([[0.0], np.cumsum(np.asarray(ds, float)[1:])])  # the repeat's odometry arc length
     trace = Trace(np.zeros(n), np.zeros(n, np.int64), [], np.full(n, np.nan))
     s = float(vertex_s[0])
     since_match = 0
@@ -97,6 +115,13 @@ def localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], score: Scor
         if k not in trace.global_best:
             trace.global_best[k] = int(np.argmax(score(k, everything)))
         return trace.global_best[k]
+
+    def window_scores(t: int, window: NDArray[np.int64]) -> NDArray[np.float64]:
+        total = np.asarray(score(t, window), float)
+        frames = range(t - 1, max(-1, t - settings.sequence_frames), -1)
+        for k in frames:
+            total = total + np.asarray(score(k, nearest_vertices(vertex_s, vertex_s[window] - (driven[t] - driven[k]))), float)
+        return total / (1 + len(frames))
 
     for t in range(n):
         if t > 0:
@@ -113,7 +138,7 @@ def localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], score: Scor
                     event = RELOC_FAIL
             else:
                 window = np.arange(max(0, v - settings.window), min(m, v + settings.window + 1), dtype=np.int64)
-                scores = np.asarray(score(t, window), float)
+                scores = window_scores(t, window)
                 j = int(np.argmax(scores))
                 trace.score[t] = scores[j]
                 if scores[j] > settings.threshold:

@@ -7,7 +7,11 @@ drive, :mod:`topoloc.place.odometry`) and the loop of :mod:`topoloc.place.locali
   ``localize.threshold`` (paper: 0.8);
 * **raw correlation** (baseline): normalised cross-correlation of grey images downsampled to
   ``localize.correlation_size``, threshold ``localize.correlation_threshold``;
-* **odometry only** (reference): path integration alone, no retrieval.
+* **odometry only** (reference): path integration alone, no retrieval;
+
+and, beyond the paper, the network and the baseline again in the Bayes filter of
+:mod:`topoloc.place.markov` (``+ filter``: the same scores over all vertices, settings
+``localize.filter``).
 
 A frame is localized within ``r`` metres when the ground-truth position of its estimated vertex is within
 ``r`` of the repeat frame's ground truth. Outputs: per-frame results (``frames``), a per-condition summary
@@ -31,20 +35,29 @@ from topoloc.io import atomic_path, write_json, write_text
 from topoloc.place.images import PlaceSet
 from topoloc.place.localize import (MATCH, RELOC_FAIL, RELOC_OK, CorrelationScorer, LocalizeSettings, NetworkScorer,
                                     Trace, correlation_descriptors, localize, nearest_vertex)
+from topoloc.place.markov import FilterSettings, markov_localize
 from topoloc.place.odometry import noisy_odometry
 from topoloc.place.render_places import check_conditions
 from topoloc.place.topometric_map import TopometricMap
 
 log = logging.getLogger(__name__)
 
-METHODS = ("siamese network", "raw correlation", "odometry only")
+METHODS = ("siamese network", "siamese network + filter", "raw correlation", "raw correlation + filter", "odometry only")
+SHORT_NAMES = dict(zip(METHODS, ("network", "network_filter", "correlation", "correlation_filter", "odometry")))
 
 
 def settings_from(conf: dict[str, Any], threshold_key: str = "threshold") -> LocalizeSettings:
     """Loop settings from the ``place.localize`` slice, with the threshold of ``threshold_key``."""
     loc = conf["localize"]
     return LocalizeSettings(float(loc[threshold_key]), int(loc["window"]), int(loc["search_every"]),
-                            int(loc["lost_frames"]), int(loc["reloc_images"]), int(loc["reloc_span"]))
+                            int(loc["lost_frames"]), int(loc["reloc_images"]), int(loc["reloc_span"]),
+                            int(loc["sequence_frames"]))
+
+
+def filter_settings(conf: dict[str, Any]) -> FilterSettings:
+    """Bayes filter settings from the ``place.localize.filter`` slice."""
+    f = conf["localize"]["filter"]
+    return FilterSettings(float(f["floor"]), float(f["mixing"]), float(f["motion_sigma_m"]), float(f["motion_sigma_rel"]))
 
 
 def dead_reckoning(vertex_s: NDArray[np.float64], ds: NDArray[np.float64]) -> Trace:
@@ -119,6 +132,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         raise InputError("place.repeat_conditions", f"{missing} not rendered in {inputs['repeat']}")
     vertex_s = topo.s
     net_settings, corr_settings = settings_from(conf), settings_from(conf, "correlation_threshold")
+    filter_conf = filter_settings(conf)
     size = tuple(conf["localize"]["correlation_size"])
     if topo.descriptor.shape[1] != size[0] * size[1]:
         raise InputError("place.localize.correlation_size", f"{size} differs from the map's descriptors (rebuild the map)")
@@ -130,16 +144,19 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         queries = model.embed(images)
         embed_s += time.perf_counter() - started
         embedded += len(images)
+        descriptors = correlation_descriptors(images, size)
         traces = {
             "siamese network": localize(vertex_s, odometry.ds, NetworkScorer(model, queries, topo.embedding), net_settings),
-            "raw correlation": localize(vertex_s, odometry.ds, CorrelationScorer(correlation_descriptors(images, size),
-                                                                                 topo.descriptor), corr_settings),
+            "siamese network + filter": markov_localize(vertex_s, odometry.ds, model.score_matrix(queries, topo.embedding),
+                                                        filter_conf),
+            "raw correlation": localize(vertex_s, odometry.ds, CorrelationScorer(descriptors, topo.descriptor), corr_settings),
+            "raw correlation + filter": markov_localize(vertex_s, odometry.ds, descriptors @ topo.descriptor.T, filter_conf),
             "odometry only": dead_reckoning(vertex_s, odometry.ds),
         }
         for method, trace in traces.items():
             tables.append(frame_table(trace, topo, repeat.xy, condition, method))
         log.info("%s: %s", condition, {m: round(float(np.mean(t.error_m <= 5.0)), 3) for m, t in
-                                       ((tab.method.iat[0], tab) for tab in tables[-3:])})
+                                       ((tab.method.iat[0], tab) for tab in tables[-len(traces):])})
     frames = pd.concat(tables, ignore_index=True)
     summary = summarize(frames)
     summary.insert(1, "held_out", summary.condition.isin(names["held_out"]))
@@ -153,13 +170,12 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     bars_figure(summary, outputs["bars"], names["held_out"])
     errors_figure(frames, outputs["errors"])
     metrics = dict(facts)
-    short = {"siamese network": "network", "raw correlation": "correlation", "odometry only": "odometry"}
     for row in summary.itertuples():
         for key in ("within_5m", "within_2m", "relocalizations", "false_matches", "median_error_m"):
-            metrics[f"{short[row.method]}_{key}_{row.condition}"] = float(getattr(row, key))
+            metrics[f"{SHORT_NAMES[row.method]}_{key}_{row.condition}"] = float(getattr(row, key))
     for method, g in summary.groupby("method"):
-        metrics[f"{short[method]}_within_5m_mean"] = float(g.within_5m.mean())
-        metrics[f"{short[method]}_within_5m_min"] = float(g.within_5m.min())
-        metrics[f"{short[method]}_within_2m_mean"] = float(g.within_2m.mean())
+        metrics[f"{SHORT_NAMES[method]}_within_5m_mean"] = float(g.within_5m.mean())
+        metrics[f"{SHORT_NAMES[method]}_within_5m_min"] = float(g.within_5m.min())
+        metrics[f"{SHORT_NAMES[method]}_within_2m_mean"] = float(g.within_2m.mean())
     write_json(outputs["metrics"], metrics)
     return metrics

@@ -55,15 +55,24 @@ def standardize(images: torch.Tensor, eps: float = 1.0) -> torch.Tensor:
     return centred / (std + eps)
 
 
+def box_mean(images: torch.Tensor, size: int) -> torch.Tensor:
+    """Mean over the ``size`` x ``size`` neighbourhood of each pixel (edges replicated), from running sums.
+
+    Running sums cost four subtractions per pixel whatever ``size`` is: several times faster on the CPU than
+    ``avg_pool2d`` with stride 1, and equal to it within float32 rounding (about 1e-4 of a 0..255 image).
+    """
+    pad = size // 2
+    x = F.pad(images, (pad, pad, pad, pad), mode="replicate")
+    x = F.pad(x.cumsum(2), (0, 0, 1, 0))
+    x = x[:, :, size:] - x[:, :, :-size]
+    x = F.pad(x.cumsum(3), (1, 0, 0, 0))
+    return (x[..., size:] - x[..., :-size]) / (size * size)
+
+
 def local_normalize(images: torch.Tensor, size: int = 9, eps: float = 4.0) -> torch.Tensor:
     """Local contrast normalisation: subtract the ``size`` x ``size`` local mean, divide by the local deviation."""
-    pad = size // 2
-
-    def local_mean(x: torch.Tensor) -> torch.Tensor:
-        return F.avg_pool2d(F.pad(x, (pad, pad, pad, pad), mode="replicate"), size, 1)
-
-    centred = images - local_mean(images)
-    return centred / (local_mean(centred * centred).sqrt() + eps)
+    centred = images - box_mean(images, size)
+    return centred / (box_mean(centred * centred, size).clamp_min(0.0).sqrt() + eps)
 
 
 NORMALIZERS = {"image": standardize, "local": local_normalize}
@@ -174,6 +183,21 @@ class SiameseNet(L.LightningModule):
         q = torch.from_numpy(np.asarray(query, np.float32)).to(self.device).expand(len(refs), -1)
         r = torch.from_numpy(np.asarray(refs, np.float32)).to(self.device)
         return torch.softmax(self.head(torch.cat([q, r], dim=1)), dim=1)[:, 1].cpu().numpy()
+
+    @torch.no_grad()
+    def score_matrix(self, queries: NDArray[np.float32], refs: NDArray[np.float32], chunk: int = 64) -> NDArray[np.float32]:
+        """P(same place) of every query embedding (n, D) against every reference (m, D): (n, m).
+
+        The first layer of the head acts on the concatenation, so it splits into a query part and a
+        reference part computed once each; only the ReLU and the last layer run per pair.
+        """
+        self.eval()
+        first, last, dim = self.head[0], self.head[2], self.hparams.embedding_dim
+        q = torch.from_numpy(np.asarray(queries, np.float32)).to(self.device) @ first.weight[:, :dim].T
+        r = torch.from_numpy(np.asarray(refs, np.float32)).to(self.device) @ first.weight[:, dim:].T + first.bias
+        out = [torch.softmax(last(torch.relu(q[i:i + chunk, None] + r[None])), dim=-1)[..., 1]
+               for i in range(0, len(q), chunk)]
+        return torch.cat(out).cpu().numpy() if out else np.zeros((0, len(r)), np.float32)
 
     # -- training ----------------------------------------------------------------------------------------
     def _step(self, batch: Any, stage: str) -> torch.Tensor:

@@ -15,7 +15,8 @@ import pandas as pd  # noqa: E402
 from topoloc.io import atomic_path  # noqa: E402
 
 COMMAND_COLORS = {"follow": "0.7", "left": "tab:blue", "right": "tab:red", "straight": "tab:green"}
-METHOD_COLORS = {"siamese network": "tab:blue", "raw correlation": "tab:orange", "odometry only": "0.6"}
+METHOD_COLORS = {"siamese network": "tab:blue", "siamese network + filter": "navy", "raw correlation": "tab:orange",
+                 "raw correlation + filter": "saddlebrown", "odometry only": "0.6"}
 
 
 def _save(fig: Any, path: str | Path) -> None:

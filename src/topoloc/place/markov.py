@@ -1,0 +1,93 @@
+"""Markov localization on the topometric map: a Bayes filter over the vertices (beyond the paper).
+
+The paper's loop (:mod:`topoloc.place.localize`) commits to one vertex per frame: a false match above the
+threshold moves the estimate, and a look-alike place inside the window can hold it there. The filter
+keeps a belief, a probability per vertex, and per repeat frame ``t``
+
+1. **predicts** with the odometry: the belief moves ``ds[t]`` metres along the vertex chain and blurs by
+   ``motion_sigma_m + motion_sigma_rel * ds[t]`` (a Gaussian in metres); a share ``mixing`` is spread
+   over all vertices, so a vehicle that is lost (or was never where the belief says) can be found again
+   anywhere: this takes the place of global relocalization;
+2. **updates** with the image: multiplies the belief by ``floor + score`` of the frame against every
+   vertex (``score`` in [0, 1]: the network's probability of "same place", or the baseline's correlation
+   clipped to [0, 1]); ``floor`` bounds how much one image can rule out;
+3. **estimates** the vertex of highest belief.
+
+The belief starts at vertex 0 (the repeat drive starts where the teach drive did). Because the evidence of
+many frames is combined along the motion, one bright false match, a look-alike place and a route that
+passes the same place twice do not move the estimate unless the frames that follow agree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.ndimage import gaussian_filter1d
+
+from topoloc.errors import InputError
+from topoloc.place.localize import Trace
+
+FILTER = "filter"  # the event of every frame of a filter trace
+
+
+@dataclass(frozen=True)
+class FilterSettings:
+    """The filter's settings (``place.localize.filter`` in the config)."""
+
+    floor: float = 0.05
+    mixing: float = 1e-3
+    motion_sigma_m: float = 0.5
+    motion_sigma_rel: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not self.floor > 0:
+            raise InputError("place.localize.filter.floor", f"must be positive, got {self.floor}")
+        if not 0 <= self.mixing < 1:
+            raise InputError("place.localize.filter.mixing", f"must be in [0, 1), got {self.mixing}")
+        for key in ("motion_sigma_m", "motion_sigma_rel"):
+            if getattr(self, key) < 0:
+                raise InputError(f"place.localize.filter.{key}", f"must be non-negative, got {getattr(self, key)}")
+
+
+def predict(belief: NDArray[np.float64], vertex_s: NDArray[np.float64], ds: float, settings: FilterSettings,
+            spacing: float) -> NDArray[np.float64]:
+    """The belief after driving ``ds`` metres: shifted along the chain, blurred, mixed with the uniform."""
+    moved = np.interp(vertex_s - ds, vertex_s, belief, left=0.0, right=0.0)
+    sigma = (settings.motion_sigma_m + settings.motion_sigma_rel * abs(ds)) / spacing
+    if sigma > 0:
+        moved = gaussian_filter1d(moved, sigma, mode="constant")
+    total = moved.sum()
+    moved = moved / total if total > 0 else np.full(len(belief), 1.0 / len(belief))
+    return (1.0 - settings.mixing) * moved + settings.mixing / len(belief)
+
+
+def markov_localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], scores: NDArray[np.float64],
+                    settings: FilterSettings = FilterSettings()) -> Trace:
+    """Filter ``len(ds)`` repeat frames with ``scores`` (frames, vertices) in [0, 1]; ``ds[0]`` is ignored.
+
+    The trace's ``score`` is the belief of the estimated vertex; ``event`` is ``filter`` throughout.
+    """
+    vertex_s = np.asarray(vertex_s, float)
+    scores = np.asarray(scores, float)
+    if len(vertex_s) == 0:
+        raise InputError("map", "the topometric map has no vertices")
+    if np.any(np.diff(vertex_s) < 0):
+        raise InputError("map", "vertex arc lengths must be non-decreasing")
+    n, m = len(ds), len(vertex_s)
+    if scores.shape != (n, m):
+        raise InputError("scores", f"expected {(n, m)} (frames, vertices), got {scores.shape}")
+    spacing = float(np.median(np.diff(vertex_s))) if m > 1 else 1.0
+    spacing = spacing if spacing > 0 else 1.0
+    belief = np.zeros(m)
+    belief[0] = 1.0
+    trace = Trace(np.zeros(n), np.zeros(n, np.int64), [FILTER] * n, np.zeros(n))
+    for t in range(n):
+        if t > 0:
+            belief = predict(belief, vertex_s, float(ds[t]), settings, spacing)
+        belief = belief * (settings.floor + np.clip(scores[t], 0.0, 1.0))
+        belief /= belief.sum()
+        v = int(np.argmax(belief))
+        trace.vertex[t], trace.s[t], trace.score[t] = v, vertex_s[v], belief[v]
+    return trace
