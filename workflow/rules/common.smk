@@ -136,3 +136,15 @@ def evaluation_inputs(wildcards):
                  "frames": rules.extract_odometry.output.frames, "segments": rules.segment_trajectory.output.segments}
         inputs |= {f"{name}_{drive}": path.format(region=wildcards.region, drive=drive) for name, path in paths.items()}
     return inputs
+
+
+def place_conf(split):
+    """The config slice one split of render_places uses (other place keys do not rerun it)."""
+    place = config["place"]
+    keys = {"train": ["route", "seed", "image", "train"], "teach": ["route", "image", "teach_condition"],
+            "repeat": ["route", "seed", "image", "repeat", "repeat_conditions"]}[split]
+    sliced = {k: place[k] for k in keys}
+    if split == "train":  # which routes are for validation, and the training settings, do not change the images
+        sliced["train"] = {k: place["train"][k] for k in ("routes", "route_length_m", "min_distance_m", "min_frames")}
+    render = {k: v for k, v in config["render"].items() if k not in ("routes", "conditions", "sheet", "width", "height")}
+    return {"split": split, "render": render, "place": sliced}

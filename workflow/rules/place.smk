@@ -7,18 +7,6 @@ PLACE_MAP_CODE = ["place/odometry.py", "place/localize.py", "place/topometric_ma
                   "place/plot.py"]
 
 
-def place_conf(split):
-    """The config slice one split of render_places uses (other place keys do not rerun it)."""
-    place = config["place"]
-    keys = {"train": ["route", "seed", "image", "train"], "teach": ["route", "image", "teach_condition"],
-            "repeat": ["route", "seed", "image", "repeat", "repeat_conditions"]}[split]
-    sliced = {k: place[k] for k in keys}
-    if split == "train":  # which routes are for validation, and the training settings, do not change the images
-        sliced["train"] = {k: place["train"][k] for k in ("routes", "route_length_m", "min_distance_m", "min_frames")}
-    render = {k: v for k, v in config["render"].items() if k not in ("routes", "conditions", "sheet", "width", "height")}
-    return {"split": split, "render": render, "place": sliced}
-
-
 rule render_places:
     """Place images at the network's input size: training routes (every condition), the teach drive, the repeat drives."""
     input:
@@ -134,7 +122,7 @@ rule localize_repeat:
         conf={k: config["place"][k] for k in ("seed", "threads", "teach_condition", "repeat_conditions",
                                                "odometry_noise", "localize")}
         | {"train": {"conditions": config["place"]["train"]["conditions"]}},
-        code=code(*PLACE_MODEL_CODE, *PLACE_MAP_CODE, "place/localize_repeat.py"),
+        code=code(*PLACE_MODEL_CODE, *PLACE_MAP_CODE, "place/markov.py", "place/localize_repeat.py"),
     log:
         "results/{region}/logs/localize_repeat.log",
     benchmark:
