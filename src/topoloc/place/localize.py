@@ -96,14 +96,20 @@ def nearest_vertices(vertex_s: NDArray[np.float64], s: NDArray[np.float64]) -> N
     return np.where(before, i - 1, i).astype(np.int64)
 
 
-def localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], score: ScoreFn,
-             settings: LocalizeSettings = LocalizeSettings()) -> Trace:
-    """Run the loop of the module docstring over ``len(ds)`` repeat frames (``ds[0]`` is ignored)."""
+def checked_vertex_s(vertex_s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The vertices' arc lengths as floats; InputError unless there are some and they do not decrease."""
     vertex_s = np.asarray(vertex_s, float)
     if len(vertex_s) == 0:
         raise InputError("map", "the topometric map has no vertices")
     if np.any(np.diff(vertex_s) < 0):
         raise InputError("map", "vertex arc lengths must be non-decreasing")
+    return vertex_s
+
+
+def localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], score: ScoreFn,
+             settings: LocalizeSettings = LocalizeSettings()) -> Trace:
+    """Run the loop of the module docstring over ``len(ds)`` repeat frames (``ds[0]`` is ignored)."""
+    vertex_s = checked_vertex_s(vertex_s)
     n, m = len(ds), len(vertex_s)
     everything = np.arange(m, dtype=np.int64)
     driven = np.concatenate([[0.0], np.cumsum(np.asarray(ds, float)[1:])])  # the repeat's odometry arc length

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
 
 from topoloc.errors import InputError
-from topoloc.place.localize import Trace
+from topoloc.place.localize import Trace, checked_vertex_s
 
 FILTER = "filter"  # the event of every frame of a filter trace
 
@@ -69,12 +69,8 @@ def markov_localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], scor
 
     The trace's ``score`` is the belief of the estimated vertex; ``event`` is ``filter`` throughout.
     """
-    vertex_s = np.asarray(vertex_s, float)
+    vertex_s = checked_vertex_s(vertex_s)
     scores = np.asarray(scores, float)
-    if len(vertex_s) == 0:
-        raise InputError("map", "the topometric map has no vertices")
-    if np.any(np.diff(vertex_s) < 0):
-        raise InputError("map", "vertex arc lengths must be non-decreasing")
     n, m = len(ds), len(vertex_s)
     if scores.shape != (n, m):
         raise InputError("scores", f"expected {(n, m)} (frames, vertices), got {scores.shape}")

@@ -118,7 +118,6 @@ class PairSampler:
         place_b = np.where(swap, anchors, partner)
         return Pairs(place_a.astype(np.int64), cond_a, place_b.astype(np.int64), cond_b, positive.astype(np.int64))
 
-
     def sample_clustered(self, n: int, cluster: int, rng: np.random.Generator) -> Pairs:
         """``n`` positive pairs whose anchors come in groups of ``cluster`` places of one street (hard-negative range).
 

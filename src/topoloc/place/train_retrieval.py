@@ -22,8 +22,6 @@ The best checkpoint is written to ``model`` and logged to MLflow as a PyTorch mo
 from __future__ import annotations
 
 import logging
-import shutil
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -34,6 +32,7 @@ import pandas as pd
 import torch
 from torch.utils.data import DataLoader, Dataset
 
+from topoloc.checkpoint import best_checkpoint, keep_best
 from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json
 from topoloc.place.images import PlaceSet
@@ -225,31 +224,19 @@ def fit(conf: dict[str, Any], places: PlaceSet, model_path: str, logger: Any = N
                for pairs in (seen, every)]
     model = build_model(conf, places.images.shape[-1], places.conditions)
     history = History(every=max(1, int(train["log_every_n_steps"])))
-    Path(model_path).parent.mkdir(parents=True, exist_ok=True)
-    ckpt_dir = Path(tempfile.mkdtemp(prefix=".checkpoints-", dir=Path(model_path).parent))
-    checkpoint = L.pytorch.callbacks.ModelCheckpoint(dirpath=ckpt_dir, filename="best", monitor="val_loss", mode="min",
-                                                     save_top_k=1)
     max_time = train.get("max_time_min")
-    trainer = L.Trainer(
-        accelerator=train["accelerator"], devices=1, max_epochs=int(train["max_epochs"]),
-        max_time={"minutes": float(max_time)} if max_time is not None else None,
-        logger=logger if logger is not None else False, callbacks=[history, checkpoint, EpochSetter(batches)],
-        log_every_n_steps=int(train["log_every_n_steps"]), enable_progress_bar=True, enable_model_summary=False,
-        fast_dev_run=fast_dev_run, deterministic=True, num_sanity_val_steps=0,
-    )
-    started = time.perf_counter()
-    try:
+    with best_checkpoint(model_path) as checkpoint:
+        trainer = L.Trainer(
+            accelerator=train["accelerator"], devices=1, max_epochs=int(train["max_epochs"]),
+            max_time={"minutes": float(max_time)} if max_time is not None else None,
+            logger=logger if logger is not None else False, callbacks=[history, checkpoint, EpochSetter(batches)],
+            log_every_n_steps=int(train["log_every_n_steps"]), enable_progress_bar=True, enable_model_summary=False,
+            fast_dev_run=fast_dev_run, deterministic=True, num_sanity_val_steps=0,
+        )
+        started = time.perf_counter()
         trainer.fit(model, DataLoader(batches, batch_size=None, shuffle=False), loaders)
         seconds = time.perf_counter() - started
-        best = checkpoint.best_model_path
-        with atomic_path(model_path) as tmp:
-            if best:
-                shutil.copyfile(best, tmp)
-                model = SiameseNet.load_from_checkpoint(best, map_location="cpu")
-            else:  # fast_dev_run saves no checkpoint
-                trainer.save_checkpoint(tmp)
-    finally:
-        shutil.rmtree(ckpt_dir, ignore_errors=True)
+        model = keep_best(checkpoint, trainer, model_path, model)
     model.condition_names = list(places.conditions)
     frame = pd.DataFrame(history.rows)
     metrics = {"train_seconds": seconds, "epochs": float(trainer.current_epoch), "steps": float(trainer.global_step),

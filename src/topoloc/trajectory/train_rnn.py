@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import json
 import logging
-import shutil
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -20,6 +18,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from topoloc.checkpoint import best_checkpoint, keep_best
 from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json
 from topoloc.trajectory.generate_dataset import check_encoding
@@ -89,39 +88,30 @@ def fit(conf: dict[str, Any], train_path: str, val_path: str, num_edges: int, mo
         raise InputError(val_path, "empty validation set (set dataset.val_fraction > 0)")
     model = build_model(conf, num_edges)
     history = History(every=max(1, int(train["log_every_n_steps"])))
-    ckpt_dir = Path(tempfile.mkdtemp(prefix=".checkpoints-", dir=Path(model_path).parent))
-    checkpoint = L.pytorch.callbacks.ModelCheckpoint(dirpath=ckpt_dir, filename="best", monitor="val_loss", mode="min", save_top_k=1)
-    callbacks: list[L.Callback] = [history, checkpoint]
+    early_stopping = []
     if train.get("early_stopping_patience") is not None:
-        callbacks.append(L.pytorch.callbacks.EarlyStopping(monitor="val_loss", mode="min", patience=int(train["early_stopping_patience"])))
+        early_stopping.append(L.pytorch.callbacks.EarlyStopping(monitor="val_loss", mode="min",
+                                                                patience=int(train["early_stopping_patience"])))
     max_time = train.get("max_time_min")
-    trainer = L.Trainer(
-        accelerator=train["accelerator"],
-        devices=1,
-        max_epochs=int(train["max_epochs"]),
-        max_time={"minutes": float(max_time)} if max_time is not None else None,
-        logger=logger if logger is not None else False,
-        callbacks=callbacks,
-        log_every_n_steps=int(train["log_every_n_steps"]),
-        gradient_clip_val=train.get("gradient_clip"),
-        enable_progress_bar=True,
-        enable_model_summary=False,
-        fast_dev_run=fast_dev_run,
-        deterministic=True,
-    )
-    started = time.perf_counter()
-    try:
+    with best_checkpoint(model_path) as checkpoint:
+        trainer = L.Trainer(
+            accelerator=train["accelerator"],
+            devices=1,
+            max_epochs=int(train["max_epochs"]),
+            max_time={"minutes": float(max_time)} if max_time is not None else None,
+            logger=logger if logger is not None else False,
+            callbacks=[history, checkpoint, *early_stopping],
+            log_every_n_steps=int(train["log_every_n_steps"]),
+            gradient_clip_val=train.get("gradient_clip"),
+            enable_progress_bar=True,
+            enable_model_summary=False,
+            fast_dev_run=fast_dev_run,
+            deterministic=True,
+        )
+        started = time.perf_counter()
         trainer.fit(model, datamodule=data)
         seconds = time.perf_counter() - started
-        best = checkpoint.best_model_path
-        with atomic_path(model_path) as tmp:
-            if best:
-                shutil.copyfile(best, tmp)
-                model = TrajectoryRNN.load_from_checkpoint(best, map_location="cpu")
-            else:  # fast_dev_run saves no checkpoint
-                trainer.save_checkpoint(tmp)
-    finally:
-        shutil.rmtree(ckpt_dir, ignore_errors=True)
+        model = keep_best(checkpoint, trainer, model_path, model)
     frame = pd.DataFrame(history.rows, columns=["step", "epoch", "train_loss", "val_loss", "val_acc", "val_acc_last"])
     val_rows = frame.dropna(subset=["val_loss"])
     best_row = val_rows.loc[val_rows.val_loss.idxmin()] if len(val_rows) else None
