@@ -52,6 +52,8 @@ def test_box_mean_is_the_replicate_padded_average_pool():
         pad = size // 2
         reference = torch.nn.functional.avg_pool2d(torch.nn.functional.pad(x, (pad,) * 4, mode="replicate"), size, 1)
         assert torch.allclose(box_mean(x, size), reference, atol=1e-3)
+    with pytest.raises(ValueError, match="odd"):
+        box_mean(x, 4)
 
 
 def test_local_weights_are_loaded(tmp_path):

@@ -7,6 +7,7 @@ import pytest
 
 from topoloc.errors import InputError
 from topoloc.place.pairs import IGNORE, PairSampler, heading_difference, pair_distances
+from topoloc.place.train_retrieval import PairBatches
 
 
 def two_streets() -> tuple[np.ndarray, np.ndarray]:
@@ -53,6 +54,21 @@ def test_label_matrix_and_clustered_batches():
     # groups of four anchors on one street: hard negatives among each other
     group = np.hypot(*(xy[pairs.place_a[:4]] - xy[pairs.place_a[0]]).T)
     assert np.all(group <= 30.0)
+
+
+def test_in_batch_pairs_are_all_across_conditions():
+    xy, yaw = two_streets()
+    images = np.zeros((3, len(xy), 4, 4, 1), np.uint8)
+    batches = PairBatches(images, np.arange(len(xy)), PairSampler(xy, yaw, [0, 1, 2]), batches=4, batch_size=32,
+                          seed=0, in_batch=True, cluster=4)
+    for k in range(len(batches)):
+        labels = batches[k][2].numpy()
+        rng = np.random.default_rng([0, 0, k])  # the batch's own draw
+        pairs = batches.sampler.sample_clustered(32, 4, rng)
+        same = pairs.cond_a[:, None] == pairs.cond_b[None]
+        assert same.sum() > 32 and np.all(labels[same] == IGNORE)  # with three conditions, about a third
+        rule = batches.sampler.label_matrix(pairs.place_a, pairs.place_b)
+        assert np.all(np.diag(labels) == 1) and np.array_equal(labels[~same], rule[~same])
 
 
 def test_bad_pair_settings_name_the_key():

@@ -138,6 +138,14 @@ def evaluation_inputs(wildcards):
     return inputs
 
 
+from topoloc.place.render_places import check_conditions
+
+try:
+    check_conditions(config["place"])
+except InputError as err:
+    _fail(str(err))
+
+
 def place_conf(split):
     """The config slice one split of render_places uses (other place keys do not rerun it)."""
     place = config["place"]
@@ -146,5 +154,6 @@ def place_conf(split):
     sliced = {k: place[k] for k in keys}
     if split == "train":  # which routes are for validation, and the training settings, do not change the images
         sliced["train"] = {k: place["train"][k] for k in ("routes", "route_length_m", "min_distance_m", "min_frames")}
-    render = {k: v for k, v in config["render"].items() if k not in ("routes", "conditions", "sheet", "width", "height")}
+    unused = ("routes", "conditions", "sheet", "width", "height", "baseline_m")
+    render = {k: v for k, v in config["render"].items() if k not in unused}
     return {"split": split, "render": render, "place": sliced}

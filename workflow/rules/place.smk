@@ -2,7 +2,8 @@
 # Library code per stage (editing a module reruns exactly the stages that use it).
 PLACE_IMAGE_CODE = ["render", "graph/road_graph.py", "odometry/simulate.py", "odometry/poses.py", "odometry/georef.py",
                     "place/images.py", "place/render_places.py"]
-PLACE_MODEL_CODE = ["place/render_places.py", "place/images.py", "place/network.py", "place/train_retrieval.py"]
+PLACE_MODEL_CODE = ["place/render_places.py", "place/images.py", "place/network.py", "place/pairs.py", "checkpoint.py",
+                    "place/train_retrieval.py"]
 PLACE_MAP_CODE = ["place/odometry.py", "place/localize.py", "place/topometric_map.py", "place/build_topometric_map.py",
                   "place/plot.py"]
 
@@ -51,7 +52,7 @@ rule train_retrieval:
     params:
         conf={k: config["place"][k] for k in ("teach_condition", "threads", "pairs", "network", "train")}
         | {"localize": {"window": config["place"]["localize"]["window"]}},
-        code=code(*PLACE_MODEL_CODE, "place/pairs.py", "place/plot.py"),
+        code=code(*PLACE_MODEL_CODE, "place/plot.py"),
     log:
         "results/{region}/logs/train_retrieval.log",
     benchmark:
@@ -78,7 +79,7 @@ rule build_topometric_map:
             labels={"region": "{region}", "figure": "topometric map"},
         ),
     params:
-        conf={k: config["place"][k] for k in ("seed", "threads", "teach_condition", "odometry_noise", "command")}
+        conf={k: config["place"][k] for k in ("seed", "threads", "odometry_noise", "command")}
         | {"localize": {"correlation_size": config["place"]["localize"]["correlation_size"]}},
         code=code(*PLACE_MODEL_CODE, *PLACE_MAP_CODE, "graph/road_graph.py"),
     log:

@@ -94,9 +94,11 @@ class PlaceSet:
             raise InputError(path, f"not a place image set ({err})") from err
 
 
-def make_rig(image: dict[str, Any]) -> StereoRig:
-    """The camera of the place images (KITTI intrinsics scaled to ``place.image`` width x height)."""
-    return StereoRig.kitti(int(image["width"]), int(image["height"]), where="place.image")
+def make_rig(image: dict[str, Any], render_conf: dict[str, Any]) -> StereoRig:
+    """The camera of the place images: KITTI intrinsics scaled to ``place.image`` width x height, mounted at
+    ``render.camera_height_m`` (the left camera only: the baseline plays no part)."""
+    return StereoRig.kitti(int(image["width"]), int(image["height"]), camera_height=float(render_conf["camera_height_m"]),
+                           where="place.image")
 
 
 def render_images(renderer: Renderer, xy: NDArray[np.float64], yaw: NDArray[np.float64], color: bool,
@@ -183,7 +185,7 @@ def training_paths(graph: RoadGraph, render_conf: dict[str, Any], train: dict[st
 def render_training_set(osm: str | None, graph: RoadGraph, render_conf: dict[str, Any], place: dict[str, Any],
                         avoid_xy: NDArray[np.float64], conditions: list[str]) -> PlaceSet:
     """The training and validation places (every kept frame of every training route) under ``conditions``."""
-    rig = make_rig(place["image"])
+    rig = make_rig(place["image"], render_conf)
     color, view = bool(place["image"]["color"]), float(render_conf["view_distance_m"])
     sets = []
     for i, (path, keep) in enumerate(training_paths(graph, render_conf, place["train"], int(place["seed"]), avoid_xy)):

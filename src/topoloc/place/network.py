@@ -1,7 +1,8 @@
 """The siamese place-recognition network (Cai & Wan, Sec. 3.3), in plain torch, trained with Lightning.
 
-* **Backbone** (:class:`Backbone`, shared by both images): each image is standardised on its own (per-channel
-  mean, one standard deviation: brightness and contrast of a condition drop out), then a compact
+* **Backbone** (:class:`Backbone`, shared by both images): each image is normalised on its own, by default by
+  its local contrast (``normalize: local``: minus the 9 x 9 local mean, over the local deviation; ``image``
+  standardises the whole image instead): most of a condition's brightness and colour cast drops out. Then a compact
   ResNet-style network: a 3x3 stem with stride 2 and one basic residual block per stage (3x3 convs, batch
   norm, ReLU, stride 2, 1x1 projection shortcut), average pooling to a ``pool`` grid (the layout of the
   scene is kept: a building on the left is not a building on the right), and a linear layer to the
@@ -9,8 +10,9 @@
   one trains from scratch, and ``weights`` loads a local state_dict.
 * **Head** (:class:`SiameseNet`): the two embeddings concatenated, two fully connected layers, a softmax over
   (different place, same place); cross-entropy loss.
-* **Training**: RAdam, learning rate 1e-4 multiplied by ``lr_decay`` every epoch, batch 32 (the paper's
-  setting); photometric and small-shift augmentation of each image (``augment``).
+* **Training**: RAdam, learning rate ``lr`` multiplied by ``lr_decay`` every epoch, batch 32 (the paper: 1e-4;
+  the default config: 1e-3 for a network trained from scratch in minutes); photometric and small-shift
+  augmentation of each image (``augment``).
 
 ``forward`` takes a stacked pair tensor ``(N, 2, C, H, W)`` of float pixel values 0..255 and returns the
 probabilities ``(N, 2)``: the signature of the logged MLflow model. For retrieval, :meth:`SiameseNet.embed`
@@ -61,6 +63,8 @@ def box_mean(images: torch.Tensor, size: int) -> torch.Tensor:
     Running sums cost four subtractions per pixel whatever ``size`` is: several times faster on the CPU than
     ``avg_pool2d`` with stride 1, and equal to it within float32 rounding (about 1e-4 of a 0..255 image).
     """
+    if size < 1 or size % 2 == 0:
+        raise ValueError(f"box size must be odd and positive, got {size}")
     pad = size // 2
     x = F.pad(images, (pad, pad, pad, pad), mode="replicate")
     x = F.pad(x.cumsum(2), (0, 0, 1, 0))

@@ -136,10 +136,11 @@ class PairSampler:
         return Pairs(place_a, cond_a, place_b, cond_b, np.ones(n, np.int64))
 
     def label_matrix(self, place_a: NDArray[np.int64], place_b: NDArray[np.int64]) -> NDArray[np.int64]:
-        """Labels of all pairs ``(place_a[i], place_b[j])`` by the 2 m rule: 1, 0, or -100 (same spot, other heading)."""
+        """Labels of all pairs ``(place_a[i], place_b[j])`` by the 2 m rule: 1, 0, or -100 (ignored: the same spot
+        with another heading, or exactly ``positive_m`` apart)."""
         d = np.hypot(*(self.xy[place_a][:, None] - self.xy[place_b][None]).transpose(2, 0, 1))
         same_view = heading_difference(self.yaw[place_a][:, None], self.yaw[place_b][None]) <= self.max_heading
-        return np.where(d > self.positive_m, 0, np.where(same_view, 1, IGNORE)).astype(np.int64)
+        return np.where(d > self.positive_m, 0, np.where((d < self.positive_m) & same_view, 1, IGNORE)).astype(np.int64)
 
 
 def pair_distances(xy: NDArray[np.float64], pairs: Pairs) -> NDArray[np.float64]:

@@ -85,7 +85,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         gap = polyline_distance(places.xy, path.xy)
         facts |= {"min_distance_to_route_m": float(gap.min()), "training_routes": float(len(np.unique(places.route)))}
     else:
-        rig = make_rig(place["image"])
+        rig = make_rig(place["image"], render_conf)
         scene = drive_scene(osm, graph, path, render_conf)
         seed = route_seed(render_conf, int(place["route"]))
         color, view = bool(place["image"]["color"]), float(render_conf["view_distance_m"])

@@ -6,8 +6,8 @@ validation; the others for training, with pairs (:mod:`topoloc.place.pairs`) dra
 ``train.batch_size`` pairs (seeded by ``train.seed`` and the epoch). With ``pairs.in_batch`` (default) the
 pairs of a batch are positives whose anchors come in groups from one street, and the loss is the
 cross-entropy of *every* anchor against *every* partner of the batch, labelled by the 2 m rule and
-balanced between the two labels (batch 32 gives 32 positives and about 990 negatives, a tenth of them
-hard, per 64 images embedded); without it, the sampler's positive / negative pairs are used one by one.
+balanced between the two labels (batch 32 gives 32 positives and about 790 negatives, a tenth of them
+hard, per 64 images embedded; pairs under the same condition are left out, as for the positives); without it, the sampler's positive / negative pairs are used one by one.
 
 Validation: ``val_loss`` / ``val_acc`` on pairs of the validation routes among the training conditions
 (this picks the checkpoint); ``val_acc_<condition>`` on pairs of a training condition against each
@@ -36,7 +36,7 @@ from topoloc.checkpoint import best_checkpoint, keep_best
 from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json
 from topoloc.place.images import PlaceSet
-from topoloc.place.pairs import PairSampler, Pairs
+from topoloc.place.pairs import IGNORE, PairSampler, Pairs
 from topoloc.place.render_places import check_conditions
 from topoloc.place.network import SiameseNet
 
@@ -61,6 +61,9 @@ class PairBatches(Dataset):
         if self.in_batch:
             pairs = self.sampler.sample_clustered(self.batch_size, self.cluster, rng)
             labels = self.sampler.label_matrix(pairs.place_a, pairs.place_b)
+            # Like the positives, every pair is across conditions: were same-condition pairs kept, nearly all of
+            # them would be negatives, and "same condition" would mean "different place" to the network.
+            labels[pairs.cond_a[:, None] == pairs.cond_b[None]] = IGNORE
         else:
             pairs = self.sampler.sample(self.batch_size, rng)
             labels = pairs.label
