@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -14,7 +11,7 @@ import pandas as pd
 import pytest
 
 from tests.conftest import write_osm
-from tests.render.conftest import REPO_ROOT, render_conf, render_outputs
+from tests.render.conftest import render_conf, render_outputs
 from topoloc.errors import InputError
 from topoloc.odometry import extract_odometry
 from topoloc.odometry.poses import read_calib, read_gps, read_poses, read_times
@@ -121,19 +118,3 @@ def test_buildings_of_an_unsorted_file(tmp_path):
     buildings = read_buildings(osm, "EPSG:32632", conf, seed=0)
     assert sorted(b.key for b in buildings) == [10, 20]
     assert {b.key: b.height for b in buildings}[20] == 7.0
-
-
-@pytest.mark.parametrize(("yaml", "expected"), [
-    ("render:\n  conditions: [snow]\n", "topoloc: config key 'render.conditions.0': 'snow' is not one of"),
-    ("render:\n  width: 10\n", "topoloc: config key 'render.width': 10 is less than the minimum of 64"),
-    ("render:\n  buildings:\n    heights: 3\n", "topoloc: config: unknown key under 'render.buildings'"),
-])
-def test_bad_render_config_fails_with_one_line(tmp_path, yaml, expected):
-    config = tmp_path / "bad.yaml"
-    config.write_text(yaml)
-    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT / "src")}
-    result = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--cores", "1", "--configfile", str(config)],
-                            cwd=REPO_ROOT, capture_output=True, text=True, env=env)
-    assert result.returncode != 0
-    lines = [line for line in result.stderr.splitlines() if line.startswith("topoloc:")]
-    assert len(lines) == 1 and lines[0].startswith(expected), result.stderr[-2000:]

@@ -116,7 +116,6 @@ def test_bad_inputs_fail_with_one_line_and_leave_nothing(workflow):
         "type.yaml": ("graph:\n  virtual_node_spacing_m: ten\n", "topoloc: config key 'graph.virtual_node_spacing_m': 'ten' is not of type 'number'"),
         "class.yaml": ("graph:\n  highway_classes: [footway]\n", "topoloc: config key 'graph.highway_classes.0': 'footway' is not one of"),
         "two.yaml": ("region:\n  name: t\n  place: Karlsruhe\n", "topoloc: region: set exactly one of region.osm_file, region.place, region.bbox (got ['osm_file', 'place'])"),
-        "teach.yaml": ("place:\n  teach_condition: fog\n", "topoloc: place.repeat_conditions: must not contain the teach condition 'fog'"),
     }
     for name, (text, expected) in cases.items():
         proc = workflow.run("-n", "--configfile", workflow.config(name, text), check=False)

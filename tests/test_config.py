@@ -1,4 +1,4 @@
-"""Config validation of the trajectory sections: one line naming the key, before any job runs."""
+"""Config validation: a bad key of any section stops `snakemake -n` with one line naming it, before any job runs."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.parametrize(
@@ -19,9 +19,16 @@ REPO = Path(__file__).resolve().parents[2]
         ("model:\n  cell: transformer\n", "topoloc: config key 'model.cell'"),
         ("train:\n  batch_size: 0\n", "topoloc: config key 'train.batch_size'"),
         ("dataset:\n  pathnodes: 4\n", "topoloc: config: unknown key under 'dataset'"),
+        ("render:\n  conditions: [snow]\n", "topoloc: config key 'render.conditions.0': 'snow' is not one of"),
+        ("render:\n  width: 10\n", "topoloc: config key 'render.width': 10 is less than the minimum of 64"),
+        ("render:\n  buildings:\n    heights: 3\n", "topoloc: config: unknown key under 'render.buildings'"),
+        ("place:\n  teach_condition: fog\n", "topoloc: place.repeat_conditions: must not contain the teach condition 'fog'"),
+        ("place:\n  train:\n    conditions: [clear_noon, overcast, sunset, rain, fog, night]\n",
+         "topoloc: place.train.conditions: keep at least one condition out of training"),
+        ("place:\n  localize:\n    filter:\n      floor: 0\n", "topoloc: config key 'place.localize.filter.floor'"),
     ],
 )
-def test_bad_trajectory_config_fails_with_one_line(tmp_path, yaml, expected):
+def test_bad_config_fails_with_one_line(tmp_path, yaml, expected):
     config = tmp_path / "bad.yaml"
     config.write_text(yaml)
     env = {**os.environ, "PYTHONPATH": str(REPO / "src")}
