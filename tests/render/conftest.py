@@ -16,7 +16,6 @@ import pytest
 from tests.conftest import write_osm
 from topoloc.graph.build_graph import build_road_graph
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
 LON0, LAT0 = 8.39, 48.98
 M_PER_DEG_LAT = 111_200.0
 M_PER_DEG_LON = 111_320.0 * np.cos(np.radians(LAT0))

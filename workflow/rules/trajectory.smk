@@ -40,7 +40,7 @@ rule train_rnn:
         metrics="results/{region}/model/train_metrics.json",
     params:
         conf={"encoding": config["encoding"], "model": config["model"], "train": config["train"]},
-        code=code(*TRAJECTORY_DATA_CODE, "checkpoint.py", "trajectory/model.py", "trajectory/train_rnn.py"),
+        code=code(*TRAJECTORY_DATA_CODE, "training.py", "trajectory/model.py", "trajectory/train_rnn.py"),
     log:
         "results/{region}/logs/train_rnn.log",
     benchmark:

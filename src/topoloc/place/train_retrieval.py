@@ -32,7 +32,7 @@ import pandas as pd
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from topoloc.checkpoint import best_checkpoint, keep_best
+from topoloc.training import History, best_checkpoint, keep_best
 from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json
 from topoloc.place.images import PlaceSet
@@ -85,25 +85,6 @@ class EpochSetter(L.Callback):
 
     def on_train_epoch_start(self, trainer: L.Trainer, module: L.LightningModule) -> None:
         self.dataset.epoch = trainer.current_epoch
-
-
-class History(L.Callback):
-    """Training loss every ``every`` steps and the validation metrics of every epoch."""
-
-    def __init__(self, every: int = 10) -> None:
-        self.every, self.rows = every, []
-
-    def on_train_batch_end(self, trainer: L.Trainer, module: L.LightningModule, outputs: Any, batch: Any, batch_idx: int) -> None:
-        if trainer.global_step % self.every == 0 and outputs is not None:
-            loss = outputs["loss"] if isinstance(outputs, dict) else outputs
-            self.rows.append({"step": trainer.global_step, "epoch": trainer.current_epoch, "train_loss": float(loss)})
-
-    def on_validation_epoch_end(self, trainer: L.Trainer, module: L.LightningModule) -> None:
-        if trainer.sanity_checking:
-            return
-        row = {"step": trainer.global_step, "epoch": trainer.current_epoch}
-        row |= {k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("val_")}
-        self.rows.append(row)
 
 
 def validation_pairs(sampler: PairSampler, places: np.ndarray, anchor_conditions: list[int], conditions: list[int],

@@ -18,36 +18,13 @@ import numpy as np
 import pandas as pd
 import torch
 
-from topoloc.checkpoint import best_checkpoint, keep_best
+from topoloc.training import History, best_checkpoint, keep_best
 from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json
 from topoloc.trajectory.generate_dataset import check_encoding
 from topoloc.trajectory.model import TrajectoryData, TrajectoryRNN
 
 log = logging.getLogger(__name__)
-
-
-class History(L.Callback):
-    """Training loss every ``every`` steps and validation metrics every epoch, for Fig. 8a."""
-
-    def __init__(self, every: int = 10) -> None:
-        self.every = every
-        self.rows: list[dict[str, float]] = []
-
-    def on_train_batch_end(self, trainer: L.Trainer, module: L.LightningModule, outputs: Any, batch: Any, batch_idx: int) -> None:
-        if trainer.global_step % self.every == 0 and outputs is not None:
-            loss = outputs["loss"] if isinstance(outputs, dict) else outputs
-            self.rows.append({"step": trainer.global_step, "epoch": trainer.current_epoch, "train_loss": float(loss)})
-
-    def on_validation_epoch_end(self, trainer: L.Trainer, module: L.LightningModule) -> None:
-        if trainer.sanity_checking:
-            return
-        metrics = trainer.callback_metrics
-        row = {"step": trainer.global_step, "epoch": trainer.current_epoch}
-        for key in ("val_loss", "val_acc", "val_acc_last"):
-            if key in metrics:
-                row[key] = float(metrics[key])
-        self.rows.append(row)
 
 
 def build_model(conf: dict[str, Any], num_edges: int) -> TrajectoryRNN:

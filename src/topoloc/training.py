@@ -1,4 +1,5 @@
-"""The best checkpoint of a training run, written to the stage's output only once training has finished."""
+"""Lightning helpers shared by the training stages: the loss history, and the best checkpoint written to the
+stage's output only once training has finished."""
 
 from __future__ import annotations
 
@@ -7,10 +8,32 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import lightning as L
 
 from topoloc.io import atomic_path
+
+
+class History(L.Callback):
+    """Training loss every ``every`` steps and the ``val_*`` metrics of every epoch, as rows for a table."""
+
+    def __init__(self, every: int = 10) -> None:
+        self.every = every
+        self.rows: list[dict[str, float]] = []
+
+    def on_train_batch_end(self, trainer: L.Trainer, module: L.LightningModule, outputs: Any, batch: Any,
+                           batch_idx: int) -> None:
+        if trainer.global_step % self.every == 0 and outputs is not None:
+            loss = outputs["loss"] if isinstance(outputs, dict) else outputs
+            self.rows.append({"step": trainer.global_step, "epoch": trainer.current_epoch, "train_loss": float(loss)})
+
+    def on_validation_epoch_end(self, trainer: L.Trainer, module: L.LightningModule) -> None:
+        if trainer.sanity_checking:
+            return
+        row = {"step": trainer.global_step, "epoch": trainer.current_epoch}
+        row |= {k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("val_")}
+        self.rows.append(row)
 
 
 @contextmanager
