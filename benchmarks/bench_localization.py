@@ -1,127 +1,128 @@
-"""Benchmark of localization on KITTI 00: accuracy of every decoder, full-drive time, decoding steps per second.
+"""Benchmark of localization on the real KITTI 00 drive: every localizer from many starts beside the oracle.
 
-Needs the kitti00 pipeline's model, graph and segments (``snakemake --configfile config/kitti00.yaml``):
+Needs the kitti00 pipeline's graph and odometry (``snakemake --configfile config/kitti00.yaml``; the learned
+localizers also its trained model, else they are left out):
 
     PYTHONPATH=src python benchmarks/bench_localization.py [--results results/kitti00] [--model PATH]
+        [--localizers metric,hmm,raw,strategy1,strategy2] [--configfile FILE] [--steps 5000]
 
 Prints markdown:
 
-1. per drive (``gt``, ``orbslam2``) and decoder (raw, Strategy 1, Strategy 2, HMM): step accuracy
-   (online and decoded sequence), consistency, distance until localized and accuracy after it
-   (:mod:`topoloc.localization.metrics`, ``localization.evaluate.confirm_m`` of config/config.yaml);
-2. the time to localize the whole 4541-frame drive from its poses file: Douglas-Peucker segmentation and
-   encoding, the RNN (windowed) and the raw, Strategy 1 and Strategy 2 decoders (median of ``--repeats``
-   runs; the HMM baseline timed apart); model loading and imports are not included;
-3. decoding steps per second of Strategy 1 and 2 for k = 5 and k = 50, on the drive's RNN outputs
-   repeated to ``--steps`` steps.
+1. per drive (``gt``, ``orbslam2``) and localizer, beside the oracle: starts, share localized, median and
+   p90 distance to localized, median ratio to the oracle, accuracy after, position error, confident wrong
+   (:mod:`topoloc.localization.evaluation`, a start every ``localization.evaluate.start_every_m``), and
+   the CPU seconds of all starts;
+2. the figures from frame 0 (distance to localized and the oracle's, accuracy after, position error);
+3. the targets of the metric filter on KITTI 00;
+4. decoding steps per second of Strategy 1 and 2 for k = 5 and k = 50 (with a model).
 """
 
 from __future__ import annotations
 
 import argparse
-import statistics
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import yaml
 
+from topoloc.config import load
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.decoders import beam_decode
-from topoloc.localization.localize import LABELS, Localizer
-from topoloc.localization.metrics import drive_metrics
+from topoloc.localization.evaluation import DriveTruth, Judge, score_start, start_frames, summarize
+from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.rnn import edge_log_probs, load_model
-from topoloc.odometry.poses import planar_track, read_poses
-from topoloc.odometry.segment_trajectory import encode_track
+from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.localizer import make, registry
+from topoloc.odometry.poses import read_poses
 
 REPO = Path(__file__).resolve().parents[1]
-KITTI00 = REPO.parent / "shared" / "data" / "kitti00"
 
 
-def timed(function, repeats: int) -> tuple[float, object]:
-    """Median seconds of ``repeats`` calls, and the last result."""
-    seconds, result = [], None
-    for _ in range(repeats):
-        started = time.perf_counter()
-        result = function()
-        seconds.append(time.perf_counter() - started)
-    return statistics.median(seconds), result
-
-
-def main() -> None:
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--results", default="results/kitti00", help="results folder of the kitti00 pipeline")
-    parser.add_argument("--model", default=None, help="model checkpoint (default: RESULTS/model/model.ckpt)")
-    parser.add_argument("--configfile", default=None, help="config overriding config/config.yaml (localization, segmentation)")
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--model", default=None, help="model checkpoint (default: RESULTS/model/model.ckpt, if present)")
+    parser.add_argument("--localizers", default="metric,hmm,raw,strategy1,strategy2")
+    parser.add_argument("--configfile", default=str(REPO / "config" / "config.yaml"))
     parser.add_argument("--steps", type=int, default=5000, help="steps of the decoding-speed runs")
-    args = parser.parse_args()
-    conf = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
-    if args.configfile:
-        extra = yaml.safe_load(Path(args.configfile).read_text()) or {}
-        for key in ("localization", "segmentation", "encoding"):
-            for sub, value in (extra.get(key) or {}).items():
-                conf[key][sub] = value if not isinstance(value, dict) else {**conf[key][sub], **value}
+    args = parser.parse_args(argv)
+    conf = load(args.configfile)
+    lconf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
+    ev = conf["localization"]["evaluate"]
     results = Path(args.results)
     graph = RoadGraph.load(results / "graph" / "graph.graphml")
-    model = load_model(args.model or str(results / "model" / "model.ckpt"))
-    localizer = Localizer(model, graph, conf["localization"])
-    states = localizer.states
-    confirm = float(conf["localization"]["evaluate"]["confirm_m"])
-
-    print(f"## Localization on KITTI 00 ({graph.num_edges} edges; k = {conf['localization']['decode']['k']}, "
-          f"RNN window {conf['localization']['rnn']['window']} / stride {conf['localization']['rnn']['stride']})\n")
-    print("| drive | decoder | steps | step acc. (online) | step acc. (decoded seq.) | consistency | localized after (m) "
-          "| online acc. after | decoded acc. after |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    logps = {}
+    model_path = Path(args.model or results / "model" / "model.ckpt")
+    known = registry()
+    names = [n for n in args.localizers.split(",") if not known[n].requires_model or model_path.is_file()]
+    model = load_model(str(model_path)) if any(known[n].requires_model for n in names) else None
+    road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], conf["localization"]["decode"]["max_skip_m"], model)
+    oracle = Oracle(graph, road.states, ev["oracle"]["angle_tol_deg"], ev["oracle"]["length_tol"])
+    judge = Judge(graph, ev["node_tolerance_m"])
+    rows, seconds = [], {}
     for drive in ("gt", "orbslam2"):
-        tokens = pd.read_csv(results / "segments" / drive / "tokens.csv")
-        result = localizer.localize(tokens.token.to_numpy(np.int64))
-        logps[drive] = result.logp
-        truth = tokens.edge_id.to_numpy()
-        for name, dec in result.decoded.items():
-            m = drive_metrics(truth, dec.online, dec.path, tokens.distance_m.to_numpy(float), states, confirm)
-            loc = f"{m['localized_m']:.0f}" if np.isfinite(m["localized_m"]) else "never"
-            after = f"{m['accuracy_after']:.3f}" if np.isfinite(m["accuracy_after"]) else "-"
-            pafter = f"{m['path_accuracy_after']:.3f}" if np.isfinite(m["path_accuracy_after"]) else "-"
-            print(f"| {drive} | {LABELS[name]} | {len(truth)} | {m['accuracy']:.3f} | {m['path_accuracy']:.3f} "
-                  f"| {m['consistency']:.3f} | {loc} | {after} | {pafter} |")
-
-    print("\n## Whole-drive localization time (median of %d runs; this CPU, 1 process)\n" % args.repeats)
-    print("| poses | frames | tokens | segmentation (s) | RNN (s) | raw + S1 + S2 (s) | total (s) | HMM baseline (s) |")
-    print("|---|---|---|---|---|---|---|---|")
-    seg = conf["segmentation"]
-    for drive in ("gt", "orbslam2"):
-        xy = planar_track(read_poses(KITTI00 / "poses" / f"00_{drive}.txt"))
-
-        def segment():
-            return encode_track(xy, graph.virtual_node_spacing_m, int(model.hparams.bins), float(seg["tolerance_m"]),
-                                float(conf["encoding"]["heading_lookahead_m"]), float(seg["turn_label_offset_m"]),
-                                float(seg["corner_skip_m"])).encoded.tokens
-
-        t_seg, tokens = timed(segment, args.repeats)
-        t_rnn, logp = timed(lambda: edge_log_probs(model, tokens, conf["localization"]["rnn"]["window"],
-                                                    conf["localization"]["rnn"]["stride"]), args.repeats)
-        opts = localizer.beam_options()
-        t_dec, _ = timed(lambda: [logp.argmax(1), beam_decode(logp, states, "strategy1", **opts),
-                                  beam_decode(logp, states, "strategy2", **opts)], args.repeats)
-        t_hmm, _ = timed(lambda: localizer.hmm.decode(tokens), max(1, args.repeats // 2))
-        print(f"| 00_{drive}.txt | {len(xy)} | {len(tokens)} | {t_seg:.4f} | {t_rnn:.4f} | {t_dec:.4f} "
-              f"| **{t_seg + t_rnn + t_dec:.3f}** | {t_hmm:.3f} |")
-
-    print(f"\n## Decoding speed ({args.steps} steps: the gt drive's RNN outputs repeated)\n")
-    print("| decoder | k | steps/s |")
-    print("|---|---|---|")
-    base = logps["gt"]
-    long = np.concatenate([base] * (args.steps // len(base) + 1))[: args.steps]
-    for strategy in ("strategy1", "strategy2"):
-        for k in (5, 50):
-            opts = {**localizer.beam_options(), "k": k}
-            seconds, _ = timed(lambda: beam_decode(long, states, strategy, **opts), max(1, args.repeats // 2))
-            print(f"| {LABELS[strategy]} | {k} | {args.steps / seconds:,.0f} |")
+        frames = pd.read_csv(results / "odometry" / drive / "frames.csv")
+        truth = DriveTruth.from_frames(frames)
+        odometry = Odometry.from_poses(read_poses(results / "odometry" / drive / "poses.txt"))
+        starts = start_frames(truth.driven, ev["start_every_m"])
+        path = true_path(graph, truth.edge, truth.xy, truth.driven)
+        began = time.process_time()
+        limits = {int(s): oracle.count(path, int(s), ev["confirm_m"]).localized_m for s in starts}
+        seconds[(drive, "oracle")] = time.process_time() - began
+        for start, limit in limits.items():
+            rows.append({"drive": drive, "start": start, "localizer": "oracle", "steps": 1.0, "localized_m": limit,
+                         "accuracy_after": np.nan, "position_error_m": np.nan, "confident_wrong": np.nan,
+                         "oracle_m": limit, "ratio": 1.0 if np.isfinite(limit) else np.nan})
+        for name in names:
+            localizer = make(name)
+            localizer.reset(road, lconf)  # map structures: built once, outside the timing
+            began = time.process_time()
+            runs = localizer.run_starts(odometry, road, lconf, starts)
+            seconds[(drive, name)] = time.process_time() - began
+            for start, observations, track in runs:
+                m = score_start(judge, truth, start, observations.frame, track.state, track.confidence, track.xy,
+                                ev["confirm_m"], ev["sure"])
+                limit = limits[start]
+                ratio = (m["localized_m"] / limit if np.isfinite(m["localized_m"]) else np.inf) if np.isfinite(limit) else np.nan
+                rows.append({"drive": drive, "start": start, "localizer": name, **m, "oracle_m": limit, "ratio": ratio})
+            print(f"{drive} {name}: {len(runs)} starts, {seconds[(drive, name)]:.2f} s CPU", file=sys.stderr, flush=True)
+    table = pd.DataFrame(rows)
+    summary = summarize(table)
+    summary["cpu_s"] = [seconds.get((r.drive, r.localizer), np.nan) for r in summary.itertuples()]
+    cols = ["drive", "localizer", "starts", "localized_share", "median_m", "p90_m", "median_ratio", "accuracy_after",
+            "position_error_m", "confident_wrong", "cpu_s"]
+    print(f"## KITTI 00, a start every {ev['start_every_m']:.0f} m ({graph.num_edges} roads)\n")
+    print(summary[cols].to_markdown(index=False, floatfmt=".3f"))
+    first = table[table.start == 0][["drive", "localizer", "localized_m", "oracle_m", "accuracy_after", "position_error_m"]]
+    print("\n## From frame 0\n")
+    print(first.to_markdown(index=False, floatfmt=".3f"))
+    if "metric" in names:
+        print("\n## Targets of the metric filter on KITTI 00\n")
+        for drive in ("gt", "orbslam2"):
+            zero = first[(first.drive == drive) & (first.localizer == "metric")].iloc[0]
+            s = summary[(summary.drive == drive) & (summary.localizer == "metric")].iloc[0]
+            o = summary[(summary.drive == drive) & (summary.localizer == "oracle")].iloc[0]
+            resolved = table[(table.drive == drive) & (table.localizer == "metric") & np.isfinite(table.oracle_m)]
+            print(f"- {drive}: from frame 0 localized after {zero.localized_m:.0f} m, oracle {zero.oracle_m:.0f} m "
+                  f"(ratio {zero.localized_m / zero.oracle_m:.2f}, target <= 1.2), accuracy after {zero.accuracy_after:.3f} "
+                  f"(>= 0.98); median over starts {s.median_m:.0f} m vs oracle {o.median_m:.0f} m (ratio "
+                  f"{s.median_m / o.median_m:.2f}, <= 1.3); median position error {s.position_error_m:.2f} m (<= 5); "
+                  f"starts the oracle resolves localized: {np.isfinite(resolved.localized_m).mean():.3f}, all starts "
+                  f"{s.localized_share:.3f}; CPU of all starts {seconds[(drive, 'metric')]:.2f} s (<= 10)")
+    if model is not None:
+        print(f"\n## Decoding speed ({args.steps} steps: the gt drive's RNN outputs repeated)\n")
+        print("| decoder | k | steps/s |\n|---|---|---|")
+        tokens = make("raw").observe(Odometry.from_poses(read_poses(results / "odometry" / "gt" / "poses.txt")), road, lconf).items
+        logp = edge_log_probs(model, np.asarray(tokens), conf["localization"]["rnn"]["window"], conf["localization"]["rnn"]["stride"])
+        long = np.concatenate([logp] * (args.steps // len(logp) + 1))[: args.steps]
+        for strategy in ("strategy1", "strategy2"):
+            for k in (5, 50):
+                began = time.perf_counter()
+                beam_decode(long, road.states, strategy, k, reseed=conf["localization"]["decode"]["reseed"])
+                print(f"| {known[strategy].label} | {k} | {args.steps / (time.perf_counter() - began):,.0f} |")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

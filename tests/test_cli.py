@@ -10,15 +10,14 @@ import numpy as np
 import pandas as pd
 import pyproj
 import pytest
-import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "localization"))
 sys.path.insert(0, str(Path(__file__).resolve().parent / "trajectory"))
 
-from localization_helpers import irregular_grid  # noqa: E402
+from localization_helpers import irregular_grid
 
-from topoloc.cli import DEFAULTS, main  # noqa: E402
-from topoloc.odometry.poses import poses_from_planar, write_poses  # noqa: E402
+from topoloc.cli import main
+from topoloc.odometry.poses import poses_from_planar, write_poses
 
 REPO = Path(__file__).resolve().parents[1]
 ROUTE = [0, 1, 6, 7, 8, 13, 14, 9, 4]
@@ -38,9 +37,10 @@ def route_track(graph, nodes, step=1.0):
 @pytest.fixture(scope="module")
 def small_map(tmp_path_factory):
     """A grid map, a model trained for one fast_dev_run step on it, and a drive along ROUTE with its GPS."""
+    from test_train import confs
+
     from topoloc.trajectory.generate_dataset import generate
     from topoloc.trajectory.train_rnn import fit
-    from test_train import confs
 
     tmp = tmp_path_factory.mktemp("cli")
     graph, edges = irregular_grid()
@@ -54,8 +54,9 @@ def small_map(tmp_path_factory):
     graph.nodes["y"] += 6670000.0
     graph.geometry = [g + [385000.0, 6670000.0] for g in graph.geometry]
     graph.save_graphml(tmp / "graph.graphml")
-    heading = np.arctan2(*np.diff(xy[:2], axis=0)[0][::-1])
-    yaw = np.full(len(xy), heading)
+    step = np.diff(xy, axis=0)
+    yaw = np.unwrap(np.arctan2(step[:, 1], step[:, 0]))
+    yaw = np.append(yaw, yaw[-1])  # the heading of travel
     local = xy - xy[0]
     write_poses(tmp / "poses.txt", poses_from_planar(local, yaw))
     lon, lat = pyproj.Transformer.from_crs("EPSG:3067", "EPSG:4326", always_xy=True).transform(xy[:, 0], xy[:, 1])
@@ -74,13 +75,16 @@ def run_cli(capsys, *args):
 def test_round_trip_writes_csv_and_geojson(small_map, capsys):
     tmp, route_edges = small_map
     code, out, err = run_cli(capsys, "--model", tmp / "model.ckpt", "--graph", tmp / "graph.graphml", "--poses", tmp / "poses.txt",
-                             "--gps", tmp / "gps.csv", "--out", tmp / "drive", "--decoder", "hmm")
+                             "--gps", tmp / "gps.csv", "--out", tmp / "drive", "--decoder", "hmm,strategy1,raw")
     assert code == 0, err
-    assert out.startswith("topoloc localize: ") and "drive.geojson" in out
+    assert out.startswith("topoloc localize: HMM baseline") and "drive.geojson" in out
     table = pd.read_csv(tmp / "drive.csv")
-    assert len(table) > 40 and {"token", "distance_m", "strategy1_path", "strategy2_path", "hmm_path", "raw_online"} <= set(table.columns)
-    # the map explains this noiseless drive: the baseline's decoded sequence follows the route, in order
-    runs = [e for i, e in enumerate(table.hmm_path) if i == 0 or e != table.hmm_path[i - 1]]
+    assert set(table.localizer) == {"hmm", "strategy1", "raw"}
+    assert {"step", "frame", "driven_m", "edge", "confidence", "x", "y", "lat", "lon", "path"} <= set(table.columns)
+    hmm = table[table.localizer == "hmm"]
+    assert len(hmm) > 40 and hmm.frame.is_monotonic_increasing
+    # the map explains this noiseless drive: the baseline's path follows the route, in order
+    runs = [e for i, e in enumerate(hmm.path) if i == 0 or e != hmm.path.iloc[i - 1]]
     assert runs == route_edges
     geo = json.loads((tmp / "drive.geojson").read_text())
     decoded = [f for f in geo["features"] if f["properties"]["kind"] == "decoded_edge"]
@@ -88,14 +92,28 @@ def test_round_trip_writes_csv_and_geojson(small_map, capsys):
     lon, lat = np.array(decoded[0]["geometry"]["coordinates"]).T
     assert np.all(np.abs(lat - 60.17) < 0.05) and np.all(np.abs(lon - 24.94) < 0.1)  # WGS84, in Helsinki
     assert any(f["properties"]["kind"] == "track" for f in geo["features"])
+    assert any(f["properties"]["kind"] == "positions" for f in geo["features"])  # the HMM's cells
 
-    # without a georeference: the same tokens and answers (the map explains the drive's turns), no track
+    # without a georeference: the same answers (the map explains the drive's turns), no track
     code, out, err = run_cli(capsys, "--model", tmp / "model.ckpt", "--graph", tmp / "graph.graphml", "--poses", tmp / "poses.txt",
-                             "--out", tmp / "plain", "--k", "3")
+                             "--out", tmp / "plain", "--k", "3", "--decoder", "hmm")
     assert code == 0, err
     plain = pd.read_csv(tmp / "plain.csv")
-    assert plain.token.tolist() == table.token.tolist() and plain.hmm_path.tolist() == table.hmm_path.tolist()
+    assert plain.path.tolist() == hmm.path.tolist() and plain.edge.tolist() == hmm.edge.tolist()
     assert not any(f["properties"]["kind"] == "track" for f in json.loads((tmp / "plain.geojson").read_text())["features"])
+
+
+def test_metric_filter_needs_no_model_and_gives_a_position(small_map, capsys):
+    tmp, route_edges = small_map
+    code, out, err = run_cli(capsys, "--graph", tmp / "graph.graphml", "--poses", tmp / "poses.txt", "--out", tmp / "metric")
+    assert code == 0, err
+    table = pd.read_csv(tmp / "metric.csv")
+    assert set(table.localizer) == {"metric"} and len(table) > 300  # a step every 2 m of the 800 m drive
+    near_end = table[table.driven_m < table.driven_m.max() - 15.0].iloc[-1]  # on the last road, not at its end node
+    assert near_end.edge == route_edges[-1] and near_end.confidence > 0.9
+    assert abs(near_end.lat - 60.17) < 0.05 and abs(near_end.lon - 24.94) < 0.1
+    assert "metric filter" in out and "sure since" in out and f"road {route_edges[-1]}" in out
+
 
 @pytest.mark.parametrize("case", ["unknown_run", "no_store", "missing_ckpt", "empty_poses", "standstill", "other_map", "other_map_no_georef",
                                   "bad_decoder"])
@@ -104,17 +122,19 @@ def test_bad_input_is_one_line(small_map, capsys, case, tmp_path):
     args = {"--model": tmp / "model.ckpt", "--graph": tmp / "graph.graphml", "--poses": tmp / "poses.txt", "--out": tmp_path / "x"}
     extra: list[str] = []
     expected = ""
+    if case in ("unknown_run", "no_store", "missing_ckpt"):
+        extra = ["--decoder", "strategy1"]
     if case == "unknown_run":
         from mlflow import MlflowClient
 
         MlflowClient(f"sqlite:///{tmp_path / 'mlflow.db'}").search_experiments()  # an existing store without that run
         capsys.readouterr()
         args["--model"] = "0123456789abcdef0123456789abcdef"
-        extra = ["--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}"]
+        extra += ["--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}"]
         expected = "topoloc: 0123456789abcdef0123456789abcdef: no trajectory model at runs:/0123456789abcdef0123456789abcdef/model"
     elif case == "no_store":
         args["--model"] = "runs:/0123456789abcdef0123456789abcdef/model"
-        extra = ["--tracking-uri", f"sqlite:///{tmp_path / 'none.db'}"]
+        extra += ["--tracking-uri", f"sqlite:///{tmp_path / 'none.db'}"]
         expected = f"topoloc: runs:/0123456789abcdef0123456789abcdef/model: no MLflow store at {tmp_path / 'none.db'}"
     elif case == "missing_ckpt":
         args["--model"] = tmp_path / "nothing.ckpt"
@@ -126,7 +146,8 @@ def test_bad_input_is_one_line(small_map, capsys, case, tmp_path):
     elif case == "standstill":
         write_poses(tmp_path / "still.txt", poses_from_planar(np.zeros((50, 2)) + np.linspace(0, 5, 50)[:, None] * [1, 0], np.zeros(50)))
         args["--poses"] = tmp_path / "still.txt"
-        expected = f"topoloc: {tmp_path / 'still.txt'}: empty trajectory: the drive covers 5.0 m, less than one virtual-node spacing"
+        extra = ["--decoder", "hmm"]  # the metric filter answers (unsure) after two steps; tokens need a spacing
+        expected = f"topoloc: {tmp_path / 'still.txt'}: empty trajectory: the drive covers 5.0 m, too little for any observation"
     elif case == "other_map":
         gps = pd.read_csv(tmp / "gps.csv")
         gps["lat"] += 0.5  # the same drive 55 km further north: nothing of this map is there
@@ -139,10 +160,11 @@ def test_bad_input_is_one_line(small_map, capsys, case, tmp_path):
         xy = np.cumsum(np.column_stack([np.cos(headings), np.sin(headings)]), axis=0)
         write_poses(tmp_path / "zigzag.txt", poses_from_planar(xy, headings))
         args["--poses"] = tmp_path / "zigzag.txt"
+        extra = ["--decoder", "hmm"]
         expected = f"topoloc: {tmp_path / 'zigzag.txt'}: nothing matches: the map turns where the drive does at only"
     elif case == "bad_decoder":
-        extra = ["--decoder", "hmm", "--no-hmm"]
-        expected = "topoloc: --decoder: 'hmm' is not run"
+        extra = ["--decoder", "kalman"]
+        expected = "topoloc: --decoder: unknown localizer 'kalman'; choose from"
     code, out, err = run_cli(capsys, *[x for kv in args.items() for x in map(str, kv)], *extra)
     assert code == 1
     lines = err.strip().splitlines()
@@ -150,13 +172,14 @@ def test_bad_input_is_one_line(small_map, capsys, case, tmp_path):
     assert not (tmp_path / "x.csv").exists()
 
 
-def test_cli_defaults_are_the_schema_defaults():
-    schema = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
-
-    def defaults(node):
-        return {k: defaults(v) if "properties" in v else v.get("default") for k, v in node["properties"].items()}
-
-    every = defaults(schema)
-    for section in ("segmentation", "encoding", "localization"):
-        for key, value in DEFAULTS[section].items():
-            assert every[section][key] == value, f"{section}.{key}"
+def test_unexplained_drive_is_a_clear_low_confidence_answer(small_map, capsys, tmp_path):
+    """A drive the map cannot explain (60 degree zigzags on a grid of right angles): no crash, never sure."""
+    tmp, _ = small_map
+    headings = np.radians(np.repeat(np.where(np.arange(12) % 2 == 0, 30.0, -30.0), 45))
+    xy = np.cumsum(np.column_stack([np.cos(headings), np.sin(headings)]), axis=0)
+    write_poses(tmp_path / "zigzag.txt", poses_from_planar(xy, headings))
+    code, out, err = run_cli(capsys, "--graph", tmp / "graph.graphml", "--poses", tmp_path / "zigzag.txt", "--out", tmp_path / "z")
+    assert code == 0, err
+    table = pd.read_csv(tmp_path / "z.csv")
+    assert (table.confidence[table.driven_m > 150] < 0.5).all()  # once the zigzags begin to tell, never sure
+    assert "not sure yet" in out

@@ -2,24 +2,27 @@
 
 ::
 
-    topoloc localize --model results/kitti00/model/model.ckpt --graph results/kitti00/graph/graph.graphml \\
-        --poses poses.txt [--gps gps.csv | --origin LAT,LON,HEADING] --out drive
+    topoloc localize --graph results/kitti00/graph/graph.graphml --poses poses.txt \\
+        [--decoder metric] [--model results/kitti00/model/model.ckpt] [--gps gps.csv | --origin LAT,LON,HEADING] \\
+        --out drive
 
-segments the poses into tokens (as the ``segment_trajectory`` stage), runs the
-RNN and the decoders, and writes ``drive.csv`` (per token: every decoder's
-online answer, decoded edge and confidence) and ``drive.geojson`` (the chosen
-decoder's edge sequence in WGS84, and the track when georeferenced). The
-model is a checkpoint path, an MLflow model URI (``runs:/<id>/model``) or the
-run id of a ``train_rnn`` stage. Bad input ends with one line:
-``topoloc: <file or option>: <what is wrong>``.
+runs one or more localizers (``--decoder``, comma-separated registry names: ``metric``, the default, needs no
+model; ``hmm`` neither; ``raw``, ``strategy1``, ``strategy2`` need the trajectory model) on the drive and
+writes ``drive.csv`` (per localizer and update: frame, metres driven, the answer's road, confidence, map
+position in the graph's CRS and as lat/lon where the localizer gives one, and the traced-back path) and
+``drive.geojson`` (the first localizer's run in WGS84: roads of its path, its positions, and the track
+when georeferenced). It prints where the vehicle is at the end and since when the answer is sure. A
+georeference (``--gps``, ``--origin``) is optional: it only checks that the drive lies on the map. The
+model is a checkpoint path, an MLflow model URI (``runs:/<id>/model``) or the run id of a ``train_rnn``
+stage. Bad input ends with one line: ``topoloc: <file or option>: <what is wrong>``.
 """
 
 from __future__ import annotations
 
 import argparse
-import copy
 import logging
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -30,52 +33,13 @@ from topoloc.errors import InputError
 
 log = logging.getLogger("topoloc")
 
-#: Defaults of the config keys the CLI uses (the schema's defaults; ``--config`` overrides them).
-DEFAULTS: dict[str, Any] = {
-    "segmentation": {"tolerance_m": 5.0, "corner_skip_m": 10.0, "turn_label_offset_m": 5.0},
-    "encoding": {"heading_lookahead_m": 10.0},
-    "localization": {
-        "rnn": {"window": 60, "stride": 20},
-        "decode": {"k": 5, "initial_hypotheses": "all", "score": "joint", "reseed": 5, "reseed_penalty": 5.0,
-                   "u_turns": "dead_ends", "max_skip_m": None},
-        "hmm": {"enabled": True, "cell_m": 5.0, "angle_sigma_deg": 20.0, "distance_sigma_m": 2.5,
-                "straight_virtual_prob": 0.85, "floor": 0.01, "reset_prob": 0.0001, "heading_window_m": 10.0},
-        "evaluate": {"confirm_m": 200.0, "initial_hypotheses": 5},
-        "max_offmap_m": 30.0,
-        "min_explained_turns": 0.5,
-    },
-}
-
-
-def _merge(base: dict[str, Any], override: dict[str, Any], where: str = "") -> dict[str, Any]:
-    out = copy.deepcopy(base)
-    for key, value in override.items():
-        if key not in out:
-            continue  # other pipeline keys (region, graph, ...) are not used here
-        if isinstance(out[key], dict):
-            if not isinstance(value, dict):
-                raise InputError(f"{where}{key}", "expected a mapping")
-            out[key] = _merge(out[key], value, f"{where}{key}.")
-        else:
-            out[key] = value
-    return out
-
 
 def load_conf(path: str | None) -> dict[str, Any]:
-    """:data:`DEFAULTS`, overridden by the matching keys of a pipeline config file."""
-    if path is None:
-        return copy.deepcopy(DEFAULTS)
-    import yaml
+    """The pipeline config of ``path`` (or the schema defaults), validated: the slices a localizer reads."""
+    from topoloc.config import load
 
-    try:
-        data = yaml.safe_load(Path(path).read_text()) or {}
-    except OSError as err:
-        raise InputError(path, f"cannot read the config file ({err.strerror})") from err
-    except yaml.YAMLError as err:
-        raise InputError(path, f"not a YAML file ({str(err).splitlines()[0]})") from err
-    if not isinstance(data, dict):
-        raise InputError(path, "a config file is a YAML mapping")
-    return _merge(DEFAULTS, data)
+    conf = load(path)
+    return {k: conf[k] for k in ("localization", "segmentation", "encoding")}
 
 
 def _georeference(args: argparse.Namespace, track: np.ndarray, yaw0: float, crs: str):
@@ -94,15 +58,30 @@ def _georeference(args: argparse.Namespace, track: np.ndarray, yaw0: float, crs:
     return None
 
 
+def _names(args: argparse.Namespace) -> list[str]:
+    from topoloc.localizer import check_names
+
+    names = [n.strip() for n in args.decoder.split(",") if n.strip()]
+    if not names:
+        raise InputError("--decoder", "name at least one localizer")
+    try:
+        return check_names(names, "--decoder")
+    except InputError as err:
+        raise InputError("--decoder", err.message) from None
+
+
 def localize(args: argparse.Namespace) -> dict[str, Any]:
     """The ``localize`` subcommand: returns a short summary (also printed)."""
-    from topoloc.graph.road_graph import RoadGraph
-    from topoloc.localization.localize import (Localizer, check_explained, check_on_map, decoded_table, write_geojson,
-                                               write_table)
-    from topoloc.localization.rnn import load_model
-    from topoloc.odometry.poses import planar_track, planar_yaw, read_poses
-    from topoloc.odometry.segment_trajectory import encode_track
+    import pyproj
 
+    from topoloc.graph.road_graph import RoadGraph
+    from topoloc.localization.localize import check_explained, check_on_map, write_geojson
+    from topoloc.localization.rnn import load_model
+    from topoloc.localization.roadmap import Odometry, RoadMap
+    from topoloc.localizer import make, registry
+    from topoloc.odometry.poses import planar_yaw, read_poses
+
+    names = _names(args)
     conf = load_conf(args.config)
     if args.k is not None:
         conf["localization"]["decode"]["k"] = args.k
@@ -110,64 +89,75 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     poses = read_poses(args.poses)
     if len(poses) < 2:
         raise InputError(args.poses, f"empty trajectory: {len(poses)} pose(s), a drive needs at least two")
-    track = planar_track(poses)
-    geo = _georeference(args, track, float(planar_yaw(poses)[0]), graph.crs)
-    xy = geo.apply(track) if geo is not None else track
-    if geo is not None:
-        check_on_map(graph, xy, float(conf["localization"]["max_offmap_m"]), args.poses, args.graph)
-    model = load_model(args.model, args.tracking_uri)
-    seg = conf["segmentation"]
-    track_tokens = encode_track(xy, graph.virtual_node_spacing_m, int(model.hparams.bins), float(seg["tolerance_m"]),
-                                float(conf["encoding"]["heading_lookahead_m"]), float(seg["turn_label_offset_m"]),
-                                float(seg["corner_skip_m"]))
-    tokens = track_tokens.encoded.tokens
-    if len(tokens) == 0:
-        raise InputError(args.poses, f"empty trajectory: the drive covers {track_tokens.segments['cum'][-1]:.1f} m, "
-                                     f"less than one virtual-node spacing ({graph.virtual_node_spacing_m:g} m)")
-    decoders = ("raw", "strategy1", "strategy2") + (("hmm",) if conf["localization"]["hmm"]["enabled"] and not args.no_hmm else ())
-    if args.decoder not in decoders:
-        raise InputError("--decoder", f"{args.decoder!r} is not run; choose from {list(decoders)}")
-    localizer = Localizer(model, graph, conf["localization"], hmm="hmm" in decoders)
-    result = localizer.localize(tokens, decoders)
-    if geo is None:
-        check_explained(result, float(conf["localization"]["min_explained_turns"]), args.poses)
-    frame = pd.DataFrame({"index": np.arange(len(tokens)), "token": tokens, "kind": track_tokens.kind,
-                          "frame": track_tokens.frame, "distance_m": track_tokens.place_m})
-    if geo is not None:
-        frame["x"], frame["y"] = xy[track_tokens.frame, 0], xy[track_tokens.frame, 1]
-    table = decoded_table(frame, result)
+    odometry = Odometry.from_poses(poses)
+    geo = _georeference(args, odometry.xy, float(planar_yaw(poses)[0]), graph.crs)
+    track_xy = geo.apply(odometry.xy) if geo is not None else None
+    if track_xy is not None:
+        check_on_map(graph, track_xy, float(conf["localization"]["max_offmap_m"]), args.poses, args.graph)
+    known = registry()
+    model = load_model(args.model, args.tracking_uri) if any(known[n].requires_model for n in names) else None
+    if model is None and any(known[n].requires_model for n in names):
+        raise InputError("--model", f"{', '.join(n for n in names if known[n].requires_model)} needs a trained model")
+    road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], conf["localization"]["decode"]["max_skip_m"], model)
+    to_lonlat = pyproj.Transformer.from_crs(graph.crs, "EPSG:4326", always_xy=True)
+    tables, seconds = [], {}
+    for name in names:
+        localizer = make(name)
+        observations = localizer.observe(odometry, road, conf)
+        if len(observations) == 0:
+            raise InputError(args.poses, f"empty trajectory: the drive covers {odometry.driven_m[-1]:.1f} m, too little for "
+                                         f"any observation of {name} (one virtual-node spacing is "
+                                         f"{graph.virtual_node_spacing_m:g} m)")
+        began = time.process_time()
+        localizer.reset(road, conf)
+        track = localizer.run(observations.items)
+        seconds[name] = time.process_time() - began
+        if name == "hmm" and geo is None:
+            check_explained(*localizer.explained(observations.items), float(conf["localization"]["min_explained_turns"]), args.poses)
+        lon, lat = to_lonlat.transform(track.xy[:, 0], track.xy[:, 1])
+        tables.append(pd.DataFrame({"localizer": name, "step": np.arange(len(track)), "frame": observations.frame,
+                                    "driven_m": odometry.driven_m[observations.frame], "edge": track.state,
+                                    "confidence": np.round(track.confidence, 5), "x": track.xy[:, 0], "y": track.xy[:, 1],
+                                    "lat": lat, "lon": lon, "path": track.path}))
+    table = pd.concat(tables, ignore_index=True)
     out = Path(args.out)
     csv_path, geojson_path = out.with_name(out.name + ".csv"), out.with_name(out.name + ".geojson")
-    write_table(csv_path, table)
-    write_geojson(geojson_path, graph, table, args.decoder, xy if geo is not None else None)
-    final = result.decoded[args.decoder]
-    sure = final.confidence >= args.sure
+    from topoloc.io import atomic_path
+
+    with atomic_path(csv_path) as tmp:
+        table.to_csv(tmp, index=False, float_format="%.7g")
+    first = table[table.localizer == names[0]]
+    write_geojson(geojson_path, graph, first, names[0], track_xy)
+    final = first.iloc[-1]
+    sure = first.confidence.to_numpy() >= args.sure
     unsure = np.flatnonzero(~sure)
-    since = None if not sure[-1] else float(track_tokens.place_m[unsure[-1] + 1 if len(unsure) else 0])
-    summary = {"tokens": len(tokens), "decoder": args.decoder, "edge_now": int(final.online[-1]),
-               "confidence_now": float(final.confidence[-1]), "sure_since_m": since,
-               "seconds": {k: round(v, 4) for k, v in result.seconds.items()}, "csv": str(csv_path), "geojson": str(geojson_path)}
-    return summary
+    since = None if not sure[-1] else float(first.driven_m.iloc[unsure[-1] + 1 if len(unsure) else 0])
+    return {"localizer": names[0], "label": known[names[0]].label, "updates": len(first), "edge_now": int(final.edge),
+            "name_now": str(graph.edges["name"].iat[int(final.edge)]) if final.edge >= 0 else "",
+            "confidence_now": float(final.confidence), "lat": float(final.lat), "lon": float(final.lon),
+            "sure_since_m": since, "seconds": {k: round(v, 4) for k, v in seconds.items()},
+            "csv": str(csv_path), "geojson": str(geojson_path)}
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="topoloc", description="Map-based geolocalization from motion.")
     sub = parser.add_subparsers(dest="command", required=True)
-    loc = sub.add_parser("localize", help="decode a drive (KITTI poses) into a road-edge sequence: CSV and GeoJSON",
-                         description="Localize a drive on a road graph with a trained trajectory RNN and multi-hypothesis decoding.")
-    loc.add_argument("--model", required=True, help="model checkpoint (.ckpt), MLflow model URI (runs:/<id>/model) or train_rnn run id")
-    loc.add_argument("--graph", required=True, help="road graph GraphML of the build_graph stage (the map the model was trained on)")
-    loc.add_argument("--poses", required=True, help="KITTI poses file: one 3x4 camera-to-world matrix per line")
+    loc = sub.add_parser("localize", help="localize a drive (KITTI poses) on a road graph: CSV and GeoJSON",
+                         description="Localize a drive on a road graph from its odometry.")
+    loc.add_argument("--graph", required=True, help="road graph GraphML of the build_graph stage")
+    loc.add_argument("--poses", required=True, help="KITTI poses file: one 3x4 camera-to-world matrix per line (any frame)")
+    loc.add_argument("--decoder", "--localizer", default="metric",
+                     help="localizer(s), comma-separated: metric (default), hmm, raw, strategy1, strategy2")
+    loc.add_argument("--model", help="trajectory model for raw / strategy1 / strategy2: checkpoint (.ckpt), MLflow model URI "
+                                     "(runs:/<id>/model) or train_rnn run id")
     geo = loc.add_mutually_exclusive_group()
     geo.add_argument("--gps", help="optional georeference: per-frame GPS CSV frame,lat,lon[,alt]")
     geo.add_argument("--origin", help="optional georeference: LAT,LON,HEADING_DEG of frame 0 (heading clockwise from north)")
     loc.add_argument("--out", required=True, help="output prefix: writes PREFIX.csv and PREFIX.geojson")
-    loc.add_argument("--decoder", default="strategy1", help="decoder of the GeoJSON and the summary (raw, strategy1, strategy2, hmm)")
-    loc.add_argument("--k", type=int, default=None, help="hypotheses kept per step (default: localization.decode.k)")
-    loc.add_argument("--config", help="pipeline config YAML whose segmentation / encoding / localization keys override the defaults")
+    loc.add_argument("--k", type=int, default=None, help="hypotheses kept per step by Strategy 1 / 2 (default: localization.decode.k)")
+    loc.add_argument("--config", help="pipeline config YAML (its segmentation / encoding / localization keys are used)")
     loc.add_argument("--tracking-uri", help="MLflow store for run ids (default: MLFLOW_TRACKING_URI or results/mlflow.db)")
-    loc.add_argument("--no-hmm", action="store_true", help="skip the HMM baseline")
-    loc.add_argument("--sure", type=float, default=0.9, help="confidence above which the answer counts as sure (summary only)")
+    loc.add_argument("--sure", type=float, default=0.9, help="confidence from which the answer counts as sure (summary only)")
     return parser
 
 
@@ -178,11 +168,12 @@ def main(argv: list[str] | None = None) -> int:
     logging.getLogger("mlflow").setLevel(logging.WARNING)
     try:
         if args.command == "localize":
-            summary = localize(args)
-            print(f"topoloc localize: {summary['tokens']} tokens; {summary['decoder']}: edge {summary['edge_now']} now "
-                  f"(confidence {summary['confidence_now']:.2f}), sure since "
-                  + (f"{summary['sure_since_m']:.0f} m" if summary["sure_since_m"] is not None else "never")
-                  + f"; wrote {summary['csv']} and {summary['geojson']}")
+            s = localize(args)
+            where = (f"road {s['edge_now']}" + (f" ({s['name_now']})" if s["name_now"] and s["name_now"] != "nan" else "")
+                     + (f" at {s['lat']:.6f}, {s['lon']:.6f}" if np.isfinite(s["lat"]) else ""))
+            sure = f"sure since {s['sure_since_m']:.0f} m" if s["sure_since_m"] is not None else "not sure yet"
+            print(f"topoloc localize: {s['label']}, {s['updates']} updates: {where}, confidence {s['confidence_now']:.2f}, "
+                  f"{sure}; wrote {s['csv']} and {s['geojson']}")
     except InputError as err:
         print(f"topoloc: {err}", file=sys.stderr)
         return 1

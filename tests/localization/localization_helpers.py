@@ -9,7 +9,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "trajectory"))
 
-from trajectory_helpers import make_graph  # noqa: E402
+from trajectory_helpers import make_graph
 
 
 def corridor_graph():

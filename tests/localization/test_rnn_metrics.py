@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from topoloc.localization.metrics import localized_step
-from topoloc.localization.rnn import edge_log_probs, load_model, window_plan
 from topoloc.errors import InputError
+from topoloc.localization.evaluation import localized_step
+from topoloc.localization.rnn import edge_log_probs, load_model, window_plan
 from topoloc.trajectory.model import TrajectoryRNN
 
 

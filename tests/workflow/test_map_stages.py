@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import pandas as pd
 import pytest
 
 pytestmark = pytest.mark.slow
@@ -48,18 +49,24 @@ def test_pipeline_caching_and_tracking(workflow):
     artifacts = {a.path for a in client.list_artifacts(build.info.run_id)}
     assert {"stats.json", "map.png", "logs"} <= artifacts
 
-    # Localization: every decoder on every drive, the table, Fig. 9, the HTML report; one MLflow run each.
+    # Localization: every localizer on every drive from every start beside the oracle, the tables, the CDF, Fig. 9,
+    # the HTML report; one MLflow run each.
     loc = root / "results" / "helsinki" / "localization"
     table = (loc / "localization.md").read_text()
-    assert all(name in table for name in ("raw (argmax)", "Strategy 1", "Strategy 2", "HMM baseline", "**all**"))
-    assert (loc / "fig9_ren00_clear_noon.png").stat().st_size > 10_000 and (loc / "ren00_clear_noon" / "strategy1.geojson").is_file()
-    decoded = (loc / "ren00_clear_noon" / "decoded.csv").read_text().splitlines()
-    assert len(decoded) > 4 and "strategy1_path" in decoded[0] and "true_edge_id" in decoded[0]
+    assert all(name in table for name in ("raw (argmax)", "Strategy 1", "Strategy 2", "HMM baseline", "metric filter",
+                                          "oracle (uniqueness limit of the map)", "**all**", "From frame 0"))
+    assert (loc / "fig9_ren00_clear_noon.png").stat().st_size > 10_000 and (loc / "localized_cdf.png").stat().st_size > 10_000
+    assert (loc / "ren00_clear_noon" / "localization.geojson").is_file()
+    answers = pd.read_csv(loc / "ren00_clear_noon" / "answers.csv")
+    assert set(answers.localizer) == {"raw", "strategy1", "strategy2", "hmm", "metric"} and answers.start.nunique() >= 1
+    starts = pd.read_csv(loc / "starts.csv")
+    assert set(starts.localizer) == {"raw", "strategy1", "strategy2", "hmm", "metric", "oracle"}
     report = root / "results" / "helsinki" / "report.html"
     assert report.stat().st_size > 100_000 and b"fig9_ren00_clear_noon.png" in report.read_bytes()
     evaluate = children["evaluate_localization"]
     assert {"localization.md", "fig9_ren00_clear_noon.png"} <= {a.path for a in client.list_artifacts(evaluate.info.run_id)}
-    assert "strategy1_accuracy" in evaluate.data.metrics and "report.html" in {
+    assert {"metric_localized_share", "strategy1_localized_share", "oracle_localized_share"} <= set(evaluate.data.metrics)
+    assert "report.html" in {
         a.path for a in client.list_artifacts(children["report_html"].info.run_id)}
 
     # Place recognition: per-condition tables, metrics per condition, the network logged as an MLflow model.

@@ -129,13 +129,32 @@ def fig9_outputs():
 
 
 def evaluation_inputs(wildcards):
-    """The graph, and per drive its decoded table, decoding stats, frames and segments."""
+    """The graph, and per drive its answers, decoding stats, frames and segments."""
     inputs = {"graph": rules.build_graph.output.graph.format(region=wildcards.region)}
     for drive in DRIVES:
-        paths = {"decoded": rules.decode_trajectories.output.table, "stats": rules.decode_trajectories.output.stats,
+        paths = {"answers": rules.decode_trajectories.output.answers, "stats": rules.decode_trajectories.output.stats,
                  "frames": rules.extract_odometry.output.frames, "segments": rules.segment_trajectory.output.segments}
         inputs |= {f"{name}_{drive}": path.format(region=wildcards.region, drive=drive) for name, path in paths.items()}
     return inputs
+
+
+def decode_inputs(wildcards):
+    """The graph and the drive's odometry; the trajectory model when a learned localizer is configured."""
+    inputs = {"graph": rules.build_graph.output.graph.format(region=wildcards.region),
+              "poses": rules.extract_odometry.output.poses.format(region=wildcards.region, drive=wildcards.drive),
+              "frames": rules.extract_odometry.output.frames.format(region=wildcards.region, drive=wildcards.drive)}
+    if any(LOCALIZERS[name].requires_model for name in config["localization"]["localizers"]):
+        inputs["model"] = rules.train_rnn.output.model.format(region=wildcards.region)
+    return inputs
+
+
+from topoloc.localizer import check_names, registry
+
+LOCALIZERS = registry()
+try:
+    check_names(config["localization"]["localizers"])
+except InputError as err:
+    _fail(str(err))
 
 
 from topoloc.place.render_places import check_conditions

@@ -1,22 +1,19 @@
 # Temporally consistent localization of the test drives, its evaluation, and the HTML report.
-LOCALIZATION_CODE = ["localization/__init__.py", "localization/connectivity.py", "localization/decoders.py",
-                     "localization/hmm.py", "localization/rnn.py", "localization/localize.py", "trajectory/model.py",
-                     "graph/road_graph.py", "encoding.py"]
+LOCALIZATION_CODE = ["localizer.py", "localizers", "localization", "trajectory/model.py", "trajectory/dataset.py",
+                     "graph/road_graph.py", "encoding.py", "odometry/segment_trajectory.py", "odometry/poses.py"]
 
 
 rule decode_trajectories:
-    """RNN outputs on a test drive decoded raw, by Strategy 1 and 2 (hypotheses on the map), and by the HMM baseline."""
+    """Every configured localizer (raw, Strategy 1 and 2, HMM baseline, metric filter) on a drive, from a start every start_every_m."""
     input:
-        model=rules.train_rnn.output.model,
-        graph=rules.build_graph.output.graph,
-        tokens=rules.segment_trajectory.output.tokens,
+        unpack(decode_inputs),
     output:
-        table="results/{region}/localization/{drive}/decoded.csv",
+        answers="results/{region}/localization/{drive}/answers.csv",
         stats="results/{region}/localization/{drive}/decoded.json",
-        geojson="results/{region}/localization/{drive}/strategy1.geojson",
+        geojson="results/{region}/localization/{drive}/localization.geojson",
     params:
-        conf=lambda wildcards: {"localization": config["localization"], "drive": wildcards.drive},
-        code=code(*LOCALIZATION_CODE, "localization/decode_trajectories.py"),
+        conf=lambda wildcards: {k: config[k] for k in ("localization", "segmentation", "encoding")} | {"drive": wildcards.drive},
+        code=code(*LOCALIZATION_CODE),
     log:
         "results/{region}/logs/decode_trajectories_{drive}.log",
     benchmark:
@@ -26,7 +23,7 @@ rule decode_trajectories:
 
 
 rule evaluate_localization:
-    """Step accuracy, consistency, distance until localized, accuracy after, per drive and aggregated; Fig. 9 per drive."""
+    """Every localizer from many starts beside the oracle (the map's uniqueness limit); tables, CDF, Fig. 9 per drive."""
     input:
         unpack(evaluation_inputs),
     output:
@@ -37,12 +34,18 @@ rule evaluate_localization:
             labels={"region": "{region}", "figure": "localization table"},
         ),
         csv="results/{region}/localization/localization.csv",
+        starts="results/{region}/localization/starts.csv",
         metrics="results/{region}/localization/metrics.json",
+        cdf=report(
+            "results/{region}/localization/localized_cdf.png",
+            caption="../report/localization_cdf.rst",
+            category="Localization",
+            labels={"region": "{region}", "figure": "distance to localized"},
+        ),
         **fig9_outputs(),
     params:
         conf={"localization": config["localization"], "drives": DRIVES, "region": config["region"]["name"]},
-        code=code(*LOCALIZATION_CODE, "localization/metrics.py", "localization/plot.py",
-                  "localization/evaluate_localization.py"),
+        code=code(*LOCALIZATION_CODE),
     log:
         "results/{region}/logs/evaluate_localization.log",
     benchmark:

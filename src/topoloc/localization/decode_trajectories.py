@@ -1,15 +1,21 @@
-"""Stage ``decode_trajectories``: the RNN's outputs on a test drive, decoded raw, by Strategy 1 and 2, and the HMM baseline.
+"""Stage ``decode_trajectories``: every configured localizer on one drive, from a start every ``start_every_m``.
 
-Inputs: ``model`` (checkpoint of ``train_rnn``), ``graph``, ``tokens`` (``tokens.csv``
-of ``segment_trajectory``: tokens with ground-truth edges). Outputs: ``table``
-(per token: the truth and every decoder's online answer, decoded sequence and
-confidence), ``stats`` (initial hypotheses, restarts, timings) and ``geojson``
-(Strategy 1's edge sequence on the map, WGS84).
+Inputs: ``graph``, ``poses`` (the drive's odometry, KITTI format, any frame: ``extract_odometry``),
+``frames`` (its ``frames.csv``: the true road and position of every frame) and, when a learned localizer
+is configured, ``model`` (the ``train_rnn`` checkpoint). Each localizer of ``localization.localizers``
+(:func:`topoloc.localizer.registry`) runs on the drive cut at every start frame
+(:func:`topoloc.localization.evaluation.start_frames`), seeing nothing before it.
+
+Outputs: ``answers`` (CSV, one row per start, localizer and update: the frame, the answer's road,
+confidence and map position, the traced-back path, and the truth of that frame), ``stats`` (JSON:
+CPU seconds per localizer, starts, decoder facts of the frame-0 run) and ``geojson`` (the frame-0 run of
+the first configured localizer that gives positions, else the first one, in WGS84).
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from typing import Any
 
 import numpy as np
@@ -17,63 +23,85 @@ import pandas as pd
 
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
-from topoloc.io import write_json
-from topoloc.localization.localize import DECODERS, Localizer, check_on_map, decoded_table, write_geojson, write_table
+from topoloc.io import atomic_path, write_json
+from topoloc.localization.evaluation import DriveTruth, start_frames
+from topoloc.localization.localize import write_geojson
 from topoloc.localization.rnn import load_model
+from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.localizer import Localizer, check_names, make, registry
+from topoloc.odometry.poses import read_poses
 
 log = logging.getLogger(__name__)
 
+ANSWER_COLUMNS = ["start", "localizer", "step", "frame", "state", "confidence", "x", "y", "path", "true_edge"]
 
-def read_tokens(path: str) -> pd.DataFrame:
-    """A ``tokens.csv`` of ``segment_trajectory``; InputError if it is not one or holds no token."""
+
+def read_frames(path: str) -> pd.DataFrame:
+    """A ``frames.csv`` of ``extract_odometry``; InputError if it is not one."""
     try:
-        tokens = pd.read_csv(path)
-    except pd.errors.EmptyDataError:
-        tokens = pd.DataFrame(columns=["token"])
-    except (OSError, pd.errors.ParserError) as err:
-        raise InputError(path, f"cannot read the tokens table ({err})") from err
-    if "token" not in tokens.columns:
-        raise InputError(path, "not a tokens table of segment_trajectory (no 'token' column)")
-    if len(tokens) == 0:
-        raise InputError(path, "empty trajectory: no tokens (the drive is shorter than one virtual-node spacing or does not move)")
-    return tokens
+        frames = pd.read_csv(path)
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as err:
+        raise InputError(path, f"cannot read the frames table ({err})") from err
+    missing = {"edge_id", "x", "y"} - set(frames.columns)
+    if missing:
+        raise InputError(path, f"not a frames table of extract_odometry (no {sorted(missing)[0]!r} column)")
+    if len(frames) < 2:
+        raise InputError(path, "empty trajectory: a drive needs at least two frames")
+    return frames
+
+
+def road_conf(conf: dict[str, Any]) -> dict[str, Any]:
+    """The slices a road localizer reads."""
+    return {k: conf[k] for k in ("localization", "segmentation", "encoding")}
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
-    """Decode drive ``conf['drive']``; write ``table``, ``stats`` and ``geojson``."""
+    """Run every configured localizer on drive ``conf['drive']`` from every start; write the answers."""
     loc = conf["localization"]
+    names = list(loc["localizers"])
+    known = registry()
+    check_names(names)
     graph = RoadGraph.load(inputs["graph"])
-    tokens = read_tokens(inputs["tokens"])
-    if {"x", "y"} <= set(tokens.columns):
-        check_on_map(graph, tokens[["x", "y"]].to_numpy(float), float(loc["max_offmap_m"]), inputs["tokens"], inputs["graph"])
-    model = load_model(inputs["model"])
-    localizer = Localizer(model, graph, loc, hmm=bool(loc["hmm"]["enabled"]))
-    result = localizer.localize(tokens["token"].to_numpy(np.int64))
-    table = decoded_table(tokens, result)
-    write_table(outputs["table"], table)
-    write_geojson(outputs["geojson"], graph, table, "strategy1")
-    stats: dict[str, Any] = {
-        "drive": conf.get("drive", ""),
-        "tokens": len(tokens),
-        "seconds": result.seconds,
-        "setup_seconds": localizer.setup_s,
-        "rnn_window": loc["rnn"].get("window"),
-        "decoders": {
-            name: {"initial_hypotheses": [int(e) for e in dec.initial], "restarts": int(dec.restarts),
-                   "mean_hypotheses": float(np.mean(dec.hypotheses)) if len(dec.hypotheses) else 0.0, **dec.extra}
-            for name, dec in result.decoded.items()
-        },
-    }
-    if localizer.hmm is not None:
-        stats["hmm_cells"] = localizer.hmm.num_cells
+    frames = read_frames(inputs["frames"])
+    poses = read_poses(inputs["poses"])
+    if len(poses) != len(frames):
+        raise InputError(inputs["poses"], f"{len(poses)} poses for the {len(frames)} frames of {inputs['frames']}")
+    truth = DriveTruth.from_frames(frames)
+    odometry = Odometry.from_poses(poses)
+    model = load_model(inputs["model"]) if any(known[name].requires_model for name in names) else None
+    road = RoadMap(graph, loc["decode"]["u_turns"], loc["decode"]["max_skip_m"], model)
+    starts = start_frames(truth.driven, float(loc["evaluate"]["start_every_m"]))
+    lconf = road_conf(conf)
+    tables, stats = [], {"drive": conf.get("drive", ""), "frames": len(frames), "starts": starts.tolist(), "localizers": {}}
+    for name in names:
+        localizer = make(name)
+        began = time.process_time()
+        runs = localizer.run_starts(odometry, road, lconf, starts)
+        seconds = time.process_time() - began
+        steps = sum(len(track) for _, _, track in runs)
+        for start, observations, track in runs:
+            tables.append(pd.DataFrame({
+                "start": start, "localizer": name, "step": np.arange(len(track)), "frame": observations.frame,
+                "state": track.state, "confidence": np.round(track.confidence, 5), "x": track.xy[:, 0], "y": track.xy[:, 1],
+                "path": track.path, "true_edge": truth.edge[observations.frame]}))
+        facts = {}
+        if runs and runs[0][0] == starts[0] and type(localizer).summary is not Localizer.summary:  # its frame-0 facts
+            localizer.reset(road, lconf)
+            localizer.run(localizer.observe(odometry, road, lconf).items)
+            facts = localizer.summary()
+        stats["localizers"][name] = {"cpu_seconds": seconds, "updates": steps,
+                                     "ms_per_update": 1000.0 * seconds / max(steps, 1), **facts}
+        log.info("%s: %d starts, %d updates, %.2f s CPU", name, len(runs), steps, seconds)
+    if not tables:
+        raise InputError(inputs["poses"], "empty trajectory: the drive is too short to give any observation")
+    answers = pd.concat(tables, ignore_index=True)[ANSWER_COLUMNS]
+    with atomic_path(outputs["answers"]) as tmp:
+        answers.to_csv(tmp, index=False, float_format="%.3f")
+    first = answers[answers.start == starts[0]]
+    shown = next((n for n in names if first[first.localizer == n].x.notna().any()), names[0])
+    write_geojson(outputs["geojson"], graph, first[first.localizer == shown], shown, frames[["x", "y"]].to_numpy(float))
     write_json(outputs["stats"], stats)
-    metrics: dict[str, float] = {"tokens": float(len(tokens))}
-    metrics |= {f"seconds_{k}": v for k, v in result.seconds.items()}
-    metrics["seconds_rnn_and_decoding"] = result.seconds["rnn"] + sum(result.seconds.get(n, 0.0) for n in ("raw", "strategy1", "strategy2"))
-    if "true_edge_id" in table.columns:
-        for name in result.decoded:
-            if name in DECODERS:
-                metrics[f"{name}_accuracy"] = float((table[f"{name}_online"] == table.true_edge_id).mean())
-                metrics[f"{name}_path_accuracy"] = float((table[f"{name}_path"] == table.true_edge_id).mean())
-    log.info("drive %s: %s", conf.get("drive", ""), metrics)
+    metrics = {f"{name}_cpu_seconds": s["cpu_seconds"] for name, s in stats["localizers"].items()}
+    metrics |= {f"{name}_ms_per_update": s["ms_per_update"] for name, s in stats["localizers"].items()}
+    metrics["starts"] = float(len(starts))
     return metrics

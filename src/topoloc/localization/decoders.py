@@ -80,6 +80,108 @@ def _share(scores: NDArray, edges: NDArray, best_edge: int) -> float:
     return float(p[edges == best_edge].sum() / p.sum())
 
 
+class Beam:
+    """Multi-hypothesis decoding one step at a time (see the module docstring): :meth:`start`, :meth:`step`, :meth:`trace`."""
+
+    def __init__(self, states: DirectedEdges, strategy: str = "strategy1", k: int = 5, initial: str = "all",
+                 score: str = "joint", reseed: int = 0, reseed_penalty: float = 5.0, initial_k: int = 5) -> None:
+        if strategy not in STRATEGIES:
+            raise ValueError(f"strategy must be one of {STRATEGIES}, got {strategy!r}")
+        if score not in SCORES:
+            raise ValueError(f"score must be one of {SCORES}, got {score!r}")
+        if initial not in ("all", "top_k"):
+            raise ValueError(f"initial must be 'all' or 'top_k', got {initial!r}")
+        self.states, self.strategy, self.k, self.initial, self.score = states, strategy, k, initial, score
+        self.reseed, self.reseed_penalty, self.initial_k = reseed, reseed_penalty, initial_k
+        self.valid_states = np.flatnonzero(states.valid)
+        self.hist_state: list[NDArray[np.int64]] = []
+
+    def start(self, logp: NDArray) -> tuple[int, float]:
+        """Hypotheses on every valid state (or on the top ``k`` edges) from the first step's ``logp``; online answer."""
+        logp = np.asarray(logp, dtype=np.float64)
+        edge_of, k = self.states.edge, self.k
+        top_only = self.strategy == "strategy2" or self.initial == "top_k"
+        beam = self.states.states_of(_top_edges(logp, k)) if top_only else self.valid_states
+        scores = logp[edge_of][beam]
+        order = np.argsort(-scores, kind="stable")
+        beam, scores = beam[order], scores[order]
+        if top_only:
+            beam, scores = beam[:k], scores[:k]
+        self.beam, self.scores = beam, scores
+        self.hist_state = [beam]
+        self.hist_parent = [np.full(len(beam), -1, np.int64)]
+        self.initial_edges = np.asarray(list(dict.fromkeys(edge_of[beam[:max(k, self.initial_k) * 2]].tolist()))[:self.initial_k],
+                                        np.int64)
+        self.restarts = 0
+        return self._online()
+
+    def _online(self) -> tuple[int, float]:
+        best = int(self.states.edge[self.beam[0]])
+        return best, _share(self.scores, self.states.edge[self.beam], best)
+
+    def step(self, logp: NDArray) -> tuple[int, float]:
+        """Expand the hypotheses with the next step's ``logp``; the online answer (edge, confidence)."""
+        logp = np.asarray(logp, dtype=np.float64)
+        states, k, edge_of = self.states, self.k, self.states.edge
+        succ, width = states.successors, states.successors.shape[1]
+        beam, scores = self.beam, self.scores
+        lp = logp[edge_of]
+        cand = succ[beam].reshape(-1)
+        parent = np.repeat(np.arange(len(beam)), width)
+        keep = cand >= 0
+        cand, parent = cand[keep], parent[keep]
+        cand_scores = scores[parent] + lp[cand]
+        if self.score == "conditional":
+            rows = succ[beam]
+            row_lp = np.where(rows >= 0, lp[np.maximum(rows, 0)], -np.inf)
+            cand_scores = cand_scores - np.logaddexp.reduce(row_lp, axis=1)[parent]
+        fresh = np.zeros(len(cand), dtype=bool)
+        if self.strategy == "strategy2":
+            allowed = np.zeros(states.num_states, dtype=bool)
+            allowed[states.states_of(_top_edges(logp, k))] = True
+            ok = allowed[cand]
+            cand, parent, cand_scores, fresh = cand[ok], parent[ok], cand_scores[ok], fresh[ok]
+            if len(cand) == 0:  # the truth was outside the top k: start over from this step's top k
+                self.restarts += 1
+                cand = np.flatnonzero(allowed)
+                parent = np.zeros(len(cand), np.int64)
+                cand_scores = scores[0] + lp[cand]
+                fresh = np.ones(len(cand), dtype=bool)
+        if self.reseed > 0:
+            seeds = states.states_of(_top_edges(logp, self.reseed))
+            cand = np.concatenate([cand, seeds])
+            parent = np.concatenate([parent, np.zeros(len(seeds), np.int64)])
+            cand_scores = np.concatenate([cand_scores, scores[0] - self.reseed_penalty + lp[seeds]])
+            fresh = np.concatenate([fresh, np.ones(len(seeds), dtype=bool)])
+        order = np.argsort(-cand_scores, kind="stable")
+        cand, parent, cand_scores, fresh = cand[order], parent[order], cand_scores[order], fresh[order]
+        _, first = np.unique(cand, return_index=True)  # recombine: the best way into each state
+        first = np.sort(first)[:k]
+        if self.reseed > 0 and fresh[first[0]] and self.strategy == "strategy1":
+            self.restarts += 1
+        self.beam, self.scores = cand[first], cand_scores[first] - cand_scores[first[0]]
+        self.hist_state.append(self.beam)
+        self.hist_parent.append(np.where(fresh[first], -2, parent[first]))
+        return self._online()
+
+    @property
+    def alive(self) -> int:
+        """Hypotheses alive after the last step."""
+        return len(self.beam)
+
+    def trace(self) -> NDArray[np.int64]:
+        """The best final hypothesis traced back; a fresh start (-2) continues from the best hypothesis before it."""
+        steps = len(self.hist_state)
+        path = np.empty(steps, np.int64)
+        index = 0
+        for t in range(steps - 1, -1, -1):
+            path[t] = self.states.edge[self.hist_state[t][index]]
+            index = int(self.hist_parent[t][index])
+            if index == -2:
+                index = 0
+        return path
+
+
 def beam_decode(
     logp: NDArray,
     states: DirectedEdges,
@@ -92,91 +194,18 @@ def beam_decode(
     initial_k: int = 5,
 ) -> Decoded:
     """Multi-hypothesis decoding of ``logp`` ``(T, E)`` on ``states`` (see the module docstring)."""
-    if strategy not in STRATEGIES:
-        raise ValueError(f"strategy must be one of {STRATEGIES}, got {strategy!r}")
-    if score not in SCORES:
-        raise ValueError(f"score must be one of {SCORES}, got {score!r}")
-    if initial not in ("all", "top_k"):
-        raise ValueError(f"initial must be 'all' or 'top_k', got {initial!r}")
     logp = np.asarray(logp, dtype=np.float64)
-    steps = len(logp)
-    if steps == 0:
+    if len(logp) == 0:
         raise ValueError("no steps to decode")
-    edge_of = states.edge
-    succ = states.successors
-    width = succ.shape[1]
-    valid_states = np.flatnonzero(states.valid)
-
-    # t = 0: hypotheses on every valid state (or on the top k edges).
-    lp = logp[0][edge_of]
-    if strategy == "strategy2" or initial == "top_k":
-        beam = states.states_of(_top_edges(logp[0], k))
-    else:
-        beam = valid_states
-    scores = lp[beam]
-    order = np.argsort(-scores, kind="stable")
-    beam, scores = beam[order], scores[order]
-    if initial == "top_k" or strategy == "strategy2":
-        beam, scores = beam[:k], scores[:k]
-    hist_state = [beam]
-    hist_parent = [np.full(len(beam), -1, np.int64)]
-    online = np.empty(steps, np.int64)
-    confidence = np.empty(steps)
-    alive = np.empty(steps, np.int64)
-    online[0], alive[0] = edge_of[beam[0]], len(beam)
-    confidence[0] = _share(scores, edge_of[beam], online[0])
-    init_edges = list(dict.fromkeys(edge_of[beam[:max(k, initial_k) * 2]].tolist()))[:initial_k]
-    restarts = 0
-    for t in range(1, steps):
-        lp = logp[t][edge_of]
-        cand = succ[beam].reshape(-1)
-        parent = np.repeat(np.arange(len(beam)), width)
-        keep = cand >= 0
-        cand, parent = cand[keep], parent[keep]
-        cand_scores = scores[parent] + lp[cand]
-        if score == "conditional":
-            rows = succ[beam]
-            row_lp = np.where(rows >= 0, lp[np.maximum(rows, 0)], -np.inf)
-            norm = np.logaddexp.reduce(row_lp, axis=1)
-            cand_scores = cand_scores - norm[parent]
-        fresh = np.zeros(len(cand), dtype=bool)
-        if strategy == "strategy2":
-            allowed = np.zeros(states.num_states, dtype=bool)
-            allowed[states.states_of(_top_edges(logp[t], k))] = True
-            ok = allowed[cand]
-            cand, parent, cand_scores, fresh = cand[ok], parent[ok], cand_scores[ok], fresh[ok]
-            if len(cand) == 0:  # the truth was outside the top k: start over from this step's top k
-                restarts += 1
-                cand = np.flatnonzero(allowed)
-                parent = np.zeros(len(cand), np.int64)
-                cand_scores = scores[0] + lp[cand]
-                fresh = np.ones(len(cand), dtype=bool)
-        if reseed > 0:
-            seeds = states.states_of(_top_edges(logp[t], reseed))
-            cand = np.concatenate([cand, seeds])
-            parent = np.concatenate([parent, np.zeros(len(seeds), np.int64)])
-            cand_scores = np.concatenate([cand_scores, scores[0] - reseed_penalty + lp[seeds]])
-            fresh = np.concatenate([fresh, np.ones(len(seeds), dtype=bool)])
-        order = np.argsort(-cand_scores, kind="stable")
-        cand, parent, cand_scores, fresh = cand[order], parent[order], cand_scores[order], fresh[order]
-        _, first = np.unique(cand, return_index=True)  # recombine: the best way into each state
-        first = np.sort(first)[:k]
-        if reseed > 0 and fresh[first[0]] and strategy == "strategy1":
-            restarts += 1
-        beam, scores = cand[first], cand_scores[first] - cand_scores[first[0]]
-        hist_state.append(beam)
-        hist_parent.append(np.where(fresh[first], -2, parent[first]))
-        online[t], alive[t] = edge_of[beam[0]], len(beam)
-        confidence[t] = _share(scores, edge_of[beam], online[t])
-    # trace the best final hypothesis back; a fresh start (-2) continues from the best hypothesis before it
-    path = np.empty(steps, np.int64)
-    index = 0
-    for t in range(steps - 1, -1, -1):
-        path[t] = edge_of[hist_state[t][index]]
-        index = int(hist_parent[t][index])
-        if index == -2:
-            index = 0
-    return Decoded(online, path, confidence, np.asarray(init_edges, np.int64), restarts, alive)
+    beam = Beam(states, strategy, k, initial, score, reseed, reseed_penalty, initial_k)
+    answers = [beam.start(logp[0])]
+    alive = [beam.alive]
+    for t in range(1, len(logp)):
+        answers.append(beam.step(logp[t]))
+        alive.append(beam.alive)
+    online = np.array([a for a, _ in answers], np.int64)
+    confidence = np.array([c for _, c in answers], float)
+    return Decoded(online, beam.trace(), confidence, beam.initial_edges, beam.restarts, np.asarray(alive, np.int64))
 
 
 def decode_strategy1(logp: NDArray, states: DirectedEdges, k: int = 5, **options) -> Decoded:

@@ -1,11 +1,13 @@
-"""Stage ``evaluate_localization``: per drive and aggregated metrics of every decoder, a markdown table, Fig. 9 per drive.
+"""Stage ``evaluate_localization``: every localizer from many starts beside the oracle; tables and figures.
 
-Inputs: ``graph``, and per drive ``<drive>`` of ``conf['drives']``:
-``decoded_<drive>`` (table of ``decode_trajectories``), ``stats_<drive>`` (its
-JSON), ``frames_<drive>`` and ``segments_<drive>`` (odometry and its
-segments, for panel (a)). Outputs: ``table`` (markdown), ``csv`` (one row per
-drive and decoder, plus ``all``), ``metrics`` (JSON) and ``fig9_<drive>``.
-Metrics: :mod:`topoloc.localization.metrics`.
+Inputs: ``graph``, and per drive ``<drive>`` of ``conf['drives']``: ``answers_<drive>`` and ``stats_<drive>``
+(of ``decode_trajectories``), ``frames_<drive>`` (truth) and ``segments_<drive>`` (for Fig. 9 (a)).
+Per start (:mod:`topoloc.localization.evaluation`): distance to localized, accuracy after, position
+error, confident wrong answers, and the oracle's uniqueness limit (:mod:`topoloc.localization.oracle`)
+with the ratio to it. Outputs: ``starts`` (CSV, one row per drive, start and localizer), ``csv``
+(summary per drive and localizer, and over all drives), ``table`` (markdown: the summary beside the
+oracle, then the frame-0 figures), ``metrics`` (JSON), ``cdf`` (distance to localized over all starts,
+every localizer and the oracle) and ``fig9_<drive>`` (the paper's Fig. 9 panels, frame 0).
 """
 
 from __future__ import annotations
@@ -18,104 +20,146 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json, write_text
-from topoloc.localization.connectivity import connected_keys, directed_edges
-from topoloc.localization.localize import DECODERS, LABELS
-from topoloc.localization.metrics import drive_metrics
-from topoloc.localization.plot import plot_fig9
+from topoloc.localization.connectivity import connected_keys, consecutive_connected, directed_edges
+from topoloc.localization.evaluation import DriveTruth, Judge, score_start, summarize
+from topoloc.localization.oracle import Oracle, true_path
+from topoloc.localization.plot import plot_cdf, plot_fig9
+from topoloc.localizer import registry
 
 log = logging.getLogger(__name__)
 
-COLUMNS = ["accuracy", "path_accuracy", "consistency", "localized_m", "accuracy_after", "path_accuracy_after", "right_from_m"]
+ORACLE = "oracle"
 
 
-def evaluate_drive(table: pd.DataFrame, states, confirm_m: float, keys=None) -> dict[str, dict[str, float]]:
-    """Metrics of every decoder in a decoded table (needs ``true_edge_id``)."""
-    if "true_edge_id" not in table.columns:
-        raise InputError("decoded table", "has no ground-truth edges (true_edge_id); nothing to evaluate")
-    distance = table["distance_m"].to_numpy(float) if "distance_m" in table.columns else np.arange(len(table), dtype=float)
-    out = {}
-    for name in DECODERS:
-        if f"{name}_online" in table.columns:
-            out[name] = drive_metrics(table.true_edge_id.to_numpy(), table[f"{name}_online"].to_numpy(),
-                                      table[f"{name}_path"].to_numpy(), distance, states, confirm_m, keys)
-    return out
+def label(name: str) -> str:
+    """Table label of a localizer (the registry's), or the name itself."""
+    known = registry()
+    return known[name].label if name in known else ("oracle (uniqueness limit of the map)" if name == ORACLE else name)
 
 
-def aggregate(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per decoder over drives: step-weighted accuracies, mean consistency, mean localization distance, share localized."""
-    out = []
-    for name, group in rows.groupby("decoder", sort=False):
-        w = group.steps.to_numpy(float)
-        after_steps = group.steps_after.to_numpy(float)  # steps from localization on, per drive
-        row = {"drive": "all", "decoder": name, "steps": w.sum(), "length_m": group.length_m.sum(),
-               "accuracy": np.average(group.accuracy, weights=w), "path_accuracy": np.average(group.path_accuracy, weights=w),
-               "consistency": np.average(group.consistency, weights=w), "localized_m": group.localized_m.mean(),
-               "accuracy_after": np.average(group.accuracy_after.fillna(0), weights=after_steps) if after_steps.sum() else np.nan,
-               "path_accuracy_after": np.average(group.path_accuracy_after.fillna(0), weights=after_steps) if after_steps.sum() else np.nan,
-               "right_from_m": group.right_from_m.mean(), "restarts": group.restarts.sum(),
-               "localized_share": float(group.localized_m.notna().mean())}
-        out.append(row)
-    return pd.DataFrame(out)
+def score_drive(drive: str, graph: RoadGraph, answers: pd.DataFrame, frames: pd.DataFrame, oracle: Oracle, judge: Judge,
+                conf: dict[str, Any]) -> pd.DataFrame:
+    """One row per start and localizer (and the oracle) of one drive."""
+    ev = conf["evaluate"]
+    confirm, sure = float(ev["confirm_m"]), float(ev["sure"])
+    truth = DriveTruth.from_frames(frames)
+    path = true_path(graph, truth.edge, truth.xy, truth.driven)
+    rows = []
+    for start in sorted(answers.start.unique()):
+        limit = oracle.count(path, int(start), confirm)
+        rows.append({"drive": drive, "start": int(start), "start_m": float(truth.driven[start]), "localizer": ORACLE,
+                     "steps": float(len(frames) - start), "length_m": float(truth.driven[-1] - truth.driven[start]),
+                     "localized_m": limit.localized_m, "oracle_m": limit.localized_m, "ratio": 1.0 if np.isfinite(limit.localized_m) else np.nan})
+        for name, run in answers[answers.start == start].groupby("localizer", sort=False):
+            m = score_start(judge, truth, int(start), run.frame.to_numpy(), run.state.to_numpy(), run.confidence.to_numpy(),
+                            run[["x", "y"]].to_numpy(float), confirm, sure)
+            ratio = np.nan
+            if np.isfinite(limit.localized_m):
+                ratio = m["localized_m"] / limit.localized_m if np.isfinite(m["localized_m"]) else np.inf
+            rows.append({"drive": drive, "start": int(start), "start_m": float(truth.driven[start]), "localizer": name, **m,
+                         "oracle_m": limit.localized_m, "ratio": ratio})
+    return pd.DataFrame(rows)
 
 
-def _fmt(value: float, kind: str) -> str:
+def frame0(drive: str, answers: pd.DataFrame, starts: pd.DataFrame, frames: pd.DataFrame, judge: Judge, states, keys) -> pd.DataFrame:
+    """The frame-0 figures of every localizer of one drive: step accuracy (online and traced-back path),
+    consistency of the path, distance to localized and the oracle's, accuracy after, position error."""
+    truth = DriveTruth.from_frames(frames)
+    first = int(answers.start.min())
+    rows = []
+    for name, run in answers[answers.start == first].groupby("localizer", sort=False):
+        frame = run.frame.to_numpy()
+        right = judge.right(run.state.to_numpy(), truth.edge[frame], truth.xy[frame])
+        right_path = judge.right(run.path.to_numpy(), truth.edge[frame], truth.xy[frame])
+        connected = consecutive_connected(states, run.path.to_numpy()[run.path.to_numpy() >= 0], keys)
+        scored = starts[(starts.start == first) & (starts.localizer == name)].iloc[0]
+        rows.append({"drive": drive, "localizer": name, "steps": len(run), "km": float(truth.driven[frame[-1]] - truth.driven[first]) / 1000,
+                     "accuracy": float(right.mean()), "path_accuracy": float(right_path.mean()),
+                     "consistency": float(connected.mean()) if len(connected) else 1.0,
+                     "localized_m": scored.localized_m, "oracle_m": scored.oracle_m, "accuracy_after": scored.accuracy_after,
+                     "position_error_m": scored.position_error_m, "confident_wrong": scored.confident_wrong})
+    return pd.DataFrame(rows)
+
+
+def _fmt(value: float, kind: str = "f") -> str:
     if value is None or (isinstance(value, float) and not np.isfinite(value)):
         return "never" if kind == "m" else "-"
-    return f"{value:.0f}" if kind == "m" else f"{value:.3f}" if kind == "f" else str(int(value))
+    return {"m": f"{value:.0f}", "f": f"{value:.3f}", "i": f"{int(value)}", "x": f"{value:.2f}", "p": f"{100 * value:.1f} %"}[kind]
 
 
-def markdown(frame: pd.DataFrame, region: str, confirm_m: float, k: int) -> str:
-    """The localization table of a config."""
-    head = ["drive", "decoder", "steps", "km", "step acc. (online)", "step acc. (decoded seq.)", "consistency",
-            "localized after (m)", "online acc. after", "right from (m)", "breaks"]
+def markdown(summary: pd.DataFrame, first: pd.DataFrame, region: str, ev: dict[str, Any]) -> str:
+    """The localization tables of a config."""
+    head = ["drive", "localizer", "starts", "localized", "median (m)", "p90 (m)", "median ratio to oracle",
+            "acc. after", "position error (m)", "confident wrong"]
     lines = [f"# Localization on {region}", "",
-             f"Online = the best hypothesis after each step; decoded sequence = the best final hypothesis traced back. "
-             f"Localized = start of the first stretch of >= {confirm_m:.0f} m with the right online edge; k = {k}.", "",
+             f"From a start every {ev['start_every_m']:.0f} m of each drive (nothing before it known). Localized = the "
+             f"start of the first stretch of >= {ev['confirm_m']:.0f} m of right answers (the true road, or one meeting it "
+             f"at a node within {ev['node_tolerance_m']:.0f} m). Median and p90 over all starts (never localized counts as "
+             f"infinitely far); ratio = localized / oracle on the starts the oracle resolves; confident wrong = wrong "
+             f"answers with confidence >= {ev['sure']}. The oracle: the distance after which exactly one walk on the map "
+             f"agrees with the drive's turns (within {ev['oracle']['angle_tol_deg']:.0f} deg) and road lengths (within "
+             f"{100 * ev['oracle']['length_tol']:.0f} %).", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for _, r in frame.iterrows():
+    for _, r in summary.iterrows():
+        is_oracle = r.localizer == ORACLE
         lines.append("| " + " | ".join([
-            f"**{r.drive}**" if r.drive == "all" else str(r.drive), LABELS.get(r.decoder, r.decoder), _fmt(r.steps, "i"),
-            f"{r.length_m / 1000:.2f}", _fmt(r.accuracy, "f"), _fmt(r.path_accuracy, "f"), _fmt(r.consistency, "f"),
-            _fmt(r.localized_m, "m"), _fmt(r.accuracy_after, "f"), _fmt(r.right_from_m, "m"), _fmt(r.restarts, "i"),
-        ]) + " |")
+            f"**{r.drive}**" if r.drive == "all" else str(r.drive), label(r.localizer), _fmt(r.starts, "i"),
+            _fmt(r.localized_share, "p"), _fmt(r.median_m, "m"), _fmt(r.p90_m, "m"),
+            "1" if is_oracle else _fmt(r.median_ratio, "x"), "" if is_oracle else _fmt(r.accuracy_after),
+            "" if is_oracle else _fmt(r.position_error_m, "x"), "" if is_oracle else _fmt(r.confident_wrong, "p")]) + " |")
+    head0 = ["drive", "localizer", "updates", "km", "step acc. (online)", "step acc. (path)", "consistency",
+             "localized after (m)", "oracle (m)", "acc. after", "position error (m)"]
+    lines += ["", "## From frame 0", "",
+              "Online = the answer after each update; path = the consistent sequence traced back after the last one.", "",
+              "| " + " | ".join(head0) + " |", "|" + "---|" * len(head0)]
+    for _, r in first.iterrows():
+        lines.append("| " + " | ".join([str(r.drive), label(r.localizer), _fmt(r.steps, "i"), f"{r.km:.2f}", _fmt(r.accuracy),
+                                        _fmt(r.path_accuracy), _fmt(r.consistency), _fmt(r.localized_m, "m"),
+                                        _fmt(r.oracle_m, "m"), _fmt(r.accuracy_after), _fmt(r.position_error_m, "x")]) + " |")
     return "\n".join(lines) + "\n"
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
-    """Evaluate the decoded drives ``conf['drives']``; write ``table``, ``csv``, ``metrics`` and ``fig9_<drive>``."""
+    """Evaluate the drives ``conf['drives']``; write the tables, the CDF and Fig. 9 per drive."""
+    loc = conf["localization"]
+    ev = loc["evaluate"]
     graph = RoadGraph.load(inputs["graph"])
-    dec_conf, ev_conf = conf["localization"]["decode"], conf["localization"]["evaluate"]
-    states = directed_edges(graph, dec_conf["u_turns"], dec_conf.get("max_skip_m"))
+    states = directed_edges(graph, loc["decode"]["u_turns"], loc["decode"]["max_skip_m"])
     keys = connected_keys(states)
-    confirm_m = float(ev_conf["confirm_m"])
-    rows = []
+    oracle = Oracle(graph, states, float(ev["oracle"]["angle_tol_deg"]), float(ev["oracle"]["length_tol"]))
+    judge = Judge(graph, float(ev["node_tolerance_m"]))
+    per_start, first = [], []
     for drive in conf["drives"]:
-        table = pd.read_csv(inputs[f"decoded_{drive}"])
-        stats = json.loads(Path(inputs[f"stats_{drive}"]).read_text())
-        per = evaluate_drive(table, states, confirm_m, keys)
-        for name, m in per.items():
-            rows.append({"drive": drive, "decoder": name, **m, "restarts": stats["decoders"].get(name, {}).get("restarts", 0)})
+        answers = pd.read_csv(inputs[f"answers_{drive}"])
         frames = pd.read_csv(inputs[f"frames_{drive}"])
+        stats = json.loads(Path(inputs[f"stats_{drive}"]).read_text())
+        starts = score_drive(drive, graph, answers, frames, oracle, judge, loc)
+        per_start.append(starts)
+        first.append(frame0(drive, answers, starts, frames, judge, states, keys))
         segments = pd.read_csv(inputs[f"segments_{drive}"])
         corners = np.append(segments.start_frame.to_numpy(), segments.end_frame.to_numpy()[-1:]) if len(segments) else None
-        initial = stats["decoders"].get("strategy1", stats["decoders"].get("raw", {})).get("initial_hypotheses", [])
-        title = (f"Fig. 9, {conf.get('region', '')} drive {drive}: {len(table)} tokens, "
-                 f"{per['raw']['length_m'] / 1000:.2f} km")
-        plot_fig9(graph, table, frames, corners, initial[:int(ev_conf["initial_hypotheses"])], per, outputs[f"fig9_{drive}"], title)
-    frame = pd.DataFrame(rows)
-    total = aggregate(frame)
-    full = pd.concat([frame, total], ignore_index=True)
+        facts = stats["localizers"]
+        initial = next((facts[n]["initial_hypotheses"] for n in ("strategy1", "hmm") if facts.get(n, {}).get("initial_hypotheses")), [])
+        plot_fig9(graph, answers[answers.start == answers.start.min()], frames, corners, initial[:int(ev["initial_hypotheses"])],
+                  first[-1].set_index("localizer").to_dict(orient="index"), {n: label(n) for n in facts},
+                  outputs[f"fig9_{drive}"], f"Fig. 9, {conf.get('region', '')} drive {drive}, from frame 0")
+    starts = pd.concat(per_start, ignore_index=True)
+    summary = summarize(starts)
+    first_table = pd.concat(first, ignore_index=True)
+    with atomic_path(outputs["starts"]) as tmp:
+        starts.to_csv(tmp, index=False, float_format="%.4f")
     with atomic_path(outputs["csv"]) as tmp:
-        full.to_csv(tmp, index=False, float_format="%.4f")
-    write_text(outputs["table"], markdown(full, conf.get("region", ""), confirm_m, int(dec_conf["k"])))
+        summary.to_csv(tmp, index=False, float_format="%.4f")
+    write_text(outputs["table"], markdown(summary, first_table, conf.get("region", ""), ev))
+    plot_cdf(starts, {n: label(n) for n in starts.localizer.unique()}, outputs["cdf"],
+             f"{conf.get('region', '')}: distance driven until localized, {len(starts[starts.localizer == ORACLE])} starts")
+    write_json(outputs["metrics"], {"summary": summary.to_dict(orient="records"), "frame0": first_table.to_dict(orient="records")})
     metrics: dict[str, float] = {}
-    for _, r in total.iterrows():
-        for col in (*COLUMNS, "localized_share"):
+    for _, r in summary[summary.drive == "all"].iterrows():
+        for col in ("localized_share", "median_m", "p90_m", "median_ratio", "accuracy_after", "position_error_m", "confident_wrong"):
             if np.isfinite(r[col]):
-                metrics[f"{r.decoder}_{col}"] = float(r[col])
-    write_json(outputs["metrics"], {"drives": rows, "all": total.to_dict(orient="records")})
+                metrics[f"{r.localizer}_{col}"] = float(r[col])
     log.info("localization: %s", metrics)
     return metrics

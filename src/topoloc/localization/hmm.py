@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 from topoloc.encoding import turning_angle_from_headings
 from topoloc.geometry import bin_centre, straight_token
 from topoloc.graph.road_graph import RoadGraph
+from topoloc.localization.cells import CellGrid, Chains
 from topoloc.localization.connectivity import DirectedEdges
 from topoloc.localization.decoders import Decoded
 
@@ -52,58 +53,34 @@ log = logging.getLogger(__name__)
 class HmmParams:
     """Parameters of the baseline (config ``localization.hmm``)."""
 
-    cell_m: float = 5.0
-    angle_sigma_deg: float = 20.0
-    distance_sigma_m: float = 2.5
-    straight_virtual_prob: float = 0.85
-    floor: float = 0.01
-    reset_prob: float = 1e-4
-    heading_window_m: float = 10.0
+    cell_m: float
+    angle_sigma_deg: float
+    distance_sigma_m: float
+    straight_virtual_prob: float
+    floor: float
+    reset_prob: float
+    heading_window_m: float
 
     @classmethod
-    def from_conf(cls, conf: dict[str, Any] | None) -> HmmParams:
-        return cls(**{k: float(v) for k, v in (conf or {}).items() if k in cls.__dataclass_fields__})
-
-
-def _headings(coords: NDArray, positions: NDArray, half: float) -> NDArray[np.float64]:
-    """Travel heading (degrees, counter-clockwise from +x) of a polyline at ``positions`` over +-``half`` metres."""
-    seg = np.hypot(*np.diff(coords, axis=0).T)
-    cum = np.concatenate([[0.0], np.cumsum(seg)])
-    a = np.clip(positions - half, 0.0, cum[-1])
-    b = np.clip(positions + half, 0.0, cum[-1])
-    b = np.where(b - a < 1e-6, np.minimum(a + 1e-3, cum[-1]), b)
-    a = np.where(b - a < 1e-6, np.maximum(b - 1e-3, 0.0), a)
-    dx = np.interp(b, cum, coords[:, 0]) - np.interp(a, cum, coords[:, 0])
-    dy = np.interp(b, cum, coords[:, 1]) - np.interp(a, cum, coords[:, 1])
-    return np.degrees(np.arctan2(dy, dx))
+    def from_conf(cls, conf: dict[str, Any]) -> HmmParams:
+        """The parameters of the validated config slice ``localization.hmm``."""
+        return cls(**{k: float(conf[k]) for k in cls.__dataclass_fields__})
 
 
 class CellHMM:
-    """The baseline on one road graph; build once, :meth:`decode` many token sequences."""
+    """The baseline on one road graph; build once, then :meth:`decode` a token sequence, or :meth:`start` and
+    :meth:`step` one token at a time and :meth:`trace` the Viterbi path."""
 
-    def __init__(self, graph: RoadGraph, states: DirectedEdges, bins: int, params: HmmParams = HmmParams()) -> None:
+    def __init__(self, graph: RoadGraph, states: DirectedEdges, bins: int, params: HmmParams) -> None:
         self.states, self.bins, self.params = states, bins, params
         self.spacing = graph.virtual_node_spacing_m
-        valid = np.flatnonzero(states.valid)
-        counts = np.zeros(states.num_states, np.int64)
-        counts[valid] = np.maximum(1, np.ceil(states.length[valid] / params.cell_m - 1e-9)).astype(np.int64)
-        self.cell_len = np.where(counts > 0, states.length / np.maximum(counts, 1), 0.0)
-        self.base = np.concatenate([[0], np.cumsum(counts)])
-        self.cell_state = np.repeat(np.arange(states.num_states), counts)
-        self.cell_index = np.arange(len(self.cell_state)) - self.base[self.cell_state]
-        self.cell_pos = (self.cell_index + 0.5) * self.cell_len[self.cell_state]
-        self.cell_edge = states.edge[self.cell_state]
-        heading = np.empty(len(self.cell_state))
-        for s in valid:
-            coords = graph.geometry[s // 2] if s % 2 == 0 else graph.geometry[s // 2][::-1]
-            cells = slice(self.base[s], self.base[s + 1])
-            heading[cells] = _headings(np.asarray(coords, float), self.cell_pos[cells], params.heading_window_m / 2.0)
-        self.cell_heading = heading
+        self.grid = CellGrid(graph, states, Chains.of_states(states), params.cell_m, params.heading_window_m)
+        self.cell_edge, self.cell_heading = self.grid.edge, self.grid.heading
         self._build_moves()
 
     @property
     def num_cells(self) -> int:
-        return len(self.cell_state)
+        return self.grid.num_cells
 
     def _distances(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Step lengths ``D`` and their probabilities for (straight, turn) tokens: shape ``(2, len(D))``."""
@@ -117,27 +94,14 @@ class CellHMM:
         return d, np.stack([straight, within / within.sum()])
 
     def _build_moves(self) -> None:
-        st = self.states
         dists, p_dist = self._distances()
         src_l, dst_l, opt_l, w_l = [], [], [], []
         for opt, dist in enumerate(dists):
-            src = np.arange(self.num_cells)
-            s = self.cell_state.copy()
-            q = self.cell_pos + dist
-            w = np.ones(self.num_cells)
-            for _ in range(64):  # hops across nodes; stops when every move has landed
-                inside = q < st.length[s]
-                if inside.any():
-                    self._land(src[inside], s[inside], q[inside], w[inside], opt, src_l, dst_l, opt_l, w_l)
-                out = ~inside
-                if not out.any():
-                    break
-                src, s, q, w = src[out], s[out], q[out] - st.length[s[out]], w[out]
-                counts = st.next_ptr[s + 1] - st.next_ptr[s]
-                rep = np.repeat(np.arange(len(s)), counts)
-                offset = np.arange(len(rep)) - np.repeat(np.cumsum(counts) - counts, counts)
-                nxt = st.next_idx[st.next_ptr[s][rep] + offset]
-                src, q, w, s = src[rep], q[rep], w[rep] / counts[rep], nxt
+            moves = self.grid.moves(dist)
+            src_l.append(moves.src)
+            dst_l.append(moves.dst)
+            opt_l.append(np.full(len(moves.src), opt))
+            w_l.append(moves.weight)
         src, dst = np.concatenate(src_l), np.concatenate(dst_l)
         opt, w = np.concatenate(opt_l), np.concatenate(w_l)
         order = np.lexsort((src, dst))
@@ -154,78 +118,80 @@ class CellHMM:
             self.log_weights = np.log(self.weights)
         log.info("HMM: %d cells, %d transitions", self.num_cells, len(self.src))
 
-    def _land(self, src, s, q, w, opt, src_l, dst_l, opt_l, w_l) -> None:
-        """Split each landing position between the two nearest cell centres of its state."""
-        n = self.base[s + 1] - self.base[s]
-        x = q / self.cell_len[s] - 0.5
-        lo = np.clip(np.floor(x), 0, n - 1).astype(np.int64)
-        frac = np.clip(x - lo, 0.0, 1.0)
-        hi = np.minimum(lo + 1, n - 1)
-        frac = np.where(hi == lo, 0.0, frac)
-        for cell, share in ((lo, 1.0 - frac), (hi, frac)):
-            keep = share > 0
-            src_l.append(src[keep])
-            dst_l.append(self.base[s[keep]] + cell[keep])
-            opt_l.append(np.full(int(keep.sum()), opt))
-            w_l.append(w[keep] * share[keep])
-
     def _edge_marginal(self, alpha: NDArray) -> NDArray[np.float64]:
         return np.bincount(self.cell_edge, weights=alpha, minlength=self.states.num_edges)
+
+    def start(self) -> None:
+        """The prior: uniform over cells (so over road length)."""
+        n = self.num_cells
+        self.alpha = np.full(n, 1.0 / n)
+        self.delta = np.full(n, -math.log(n))
+        self.back: list[NDArray[np.int32]] = []
+        self.log_evidence = 0.0
+        self.initial = np.zeros(0, np.int64)
+
+    def step(self, token: int, initial_k: int = 5) -> tuple[int, float]:
+        """Forward filter and Viterbi step for one token; the online answer (edge, its marginal)."""
+        n = self.num_cells
+        reset = self.params.reset_prob
+        new = np.bincount(self.dst, weights=self.alpha[self.src] * self.weights[token], minlength=n)
+        total = new.sum()
+        self.log_evidence += math.log(max(total, 1e-300))
+        alpha = new / total if total > 0 else np.full(n, 1.0 / n)
+        if reset > 0:
+            alpha = (1 - reset) * alpha + reset / n
+        self.alpha = alpha
+        marginal = self._edge_marginal(alpha)
+        online = int(np.argmax(marginal))
+        if not self.back:
+            self.initial = np.argsort(-marginal, kind="stable")[:initial_k]
+        # Viterbi: the best way into each cell (entries are grouped by destination)
+        delta = self.delta
+        score = delta[self.src] + self.log_weights[token]
+        best = np.full(n, -np.inf)
+        best[self.dst_cells] = np.maximum.reduceat(score, self.dst_start)
+        hit = score >= np.repeat(best[self.dst_cells], np.diff(np.append(self.dst_start, len(score))))
+        arg = np.maximum.reduceat(np.where(hit, np.arange(len(score)), -1), self.dst_start)
+        pointer = np.full(n, -1, np.int64)
+        pointer[self.dst_cells] = self.src[arg]
+        top = int(np.argmax(delta))
+        pointer = np.where(pointer < 0, top, pointer)
+        if reset > 0:  # a fresh start from the best cell beats the best way in
+            take = delta[top] + math.log(reset / n) > best
+            best = np.where(take, delta[top] + math.log(reset / n), best)
+            pointer = np.where(take, -1 - top, pointer)
+        self.delta = best - best.max()
+        self.back.append(pointer.astype(np.int32))
+        return online, float(marginal[online])
+
+    def trace(self) -> tuple[NDArray[np.int64], int]:
+        """The Viterbi cells of the steps so far, and the number of fresh starts on it."""
+        steps = len(self.back)
+        path_cells = np.empty(steps, np.int64)
+        restarts = 0
+        cell = int(np.argmax(self.delta))
+        for t in range(steps - 1, -1, -1):
+            path_cells[t] = cell
+            cell = int(self.back[t][cell])
+            if cell < 0:
+                restarts += t > 0
+                cell = -1 - cell
+        return path_cells, restarts
 
     def decode(self, tokens: NDArray[np.int64], initial_k: int = 5) -> Decoded:
         """Forward filter (online) and Viterbi path (consistent) of one drive's tokens."""
         tokens = np.asarray(tokens, np.int64)
         if len(tokens) == 0:
             raise ValueError("no tokens")
-        n = self.num_cells
-        reset = self.params.reset_prob
-        log_reset = math.log(reset / n) if reset > 0 else -np.inf
-        alpha = np.full(n, 1.0 / n)
-        delta = np.full(n, -math.log(n))
-        online, confidence = np.empty(len(tokens), np.int64), np.empty(len(tokens))
-        back = np.empty((len(tokens), n), np.int32)
-        log_evidence, restarts = 0.0, 0
-        initial = np.zeros(0, np.int64)
-        for t, token in enumerate(tokens):
-            new = np.bincount(self.dst, weights=alpha[self.src] * self.weights[token], minlength=n)
-            total = new.sum()
-            log_evidence += math.log(max(total, 1e-300))
-            alpha = new / total if total > 0 else np.full(n, 1.0 / n)
-            if reset > 0:
-                alpha = (1 - reset) * alpha + reset / n
-            marginal = self._edge_marginal(alpha)
-            online[t] = int(np.argmax(marginal))
-            confidence[t] = float(marginal[online[t]])
-            if t == 0:
-                initial = np.argsort(-marginal, kind="stable")[:initial_k]
-            # Viterbi: the best way into each cell (entries are grouped by destination)
-            score = delta[self.src] + self.log_weights[token]
-            best = np.full(n, -np.inf)
-            best[self.dst_cells] = np.maximum.reduceat(score, self.dst_start)
-            hit = score >= np.repeat(best[self.dst_cells], np.diff(np.append(self.dst_start, len(score))))
-            arg = np.maximum.reduceat(np.where(hit, np.arange(len(score)), -1), self.dst_start)
-            pointer = np.full(n, -1, np.int64)
-            pointer[self.dst_cells] = self.src[arg]
-            top = int(np.argmax(delta))
-            pointer = np.where(pointer < 0, top, pointer)
-            if reset > 0:  # a fresh start from the best cell beats the best way in
-                take = delta[top] + log_reset > best
-                best = np.where(take, delta[top] + log_reset, best)
-                pointer = np.where(take, -1 - top, pointer)
-            delta = best - best.max()
-            back[t] = pointer
-        path_cells = np.empty(len(tokens), np.int64)
-        cell = int(np.argmax(delta))
-        for t in range(len(tokens) - 1, -1, -1):
-            path_cells[t] = cell
-            cell = int(back[t, cell])
-            if cell < 0:
-                restarts += t > 0
-                cell = -1 - cell
-        path = self.cell_edge[path_cells]
-        extra = {"log_evidence": log_evidence, "explained_turns": self.explained_turns(tokens, path_cells),
+        self.start()
+        answers = [self.step(int(token), initial_k) for token in tokens]
+        path_cells, restarts = self.trace()
+        online = np.array([a for a, _ in answers], np.int64)
+        confidence = np.array([c for _, c in answers], float)
+        extra = {"log_evidence": self.log_evidence, "explained_turns": self.explained_turns(tokens, path_cells),
                  "turn_tokens": int(np.sum(tokens[1:] != straight_token(self.bins)))}
-        return Decoded(online, path, confidence, initial, restarts, np.full(len(tokens), n, np.int64), extra=extra)
+        return Decoded(online, self.cell_edge[path_cells], confidence, self.initial, restarts,
+                       np.full(len(tokens), self.num_cells, np.int64), extra=extra)
 
     def explained_turns(self, tokens: NDArray[np.int64], path_cells: NDArray[np.int64]) -> float:
         """Share of the turn tokens (not straight) that the map's turn along the Viterbi path matches within ``angle_sigma_deg``.

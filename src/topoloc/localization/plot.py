@@ -1,4 +1,5 @@
-"""The paper's Fig. 9 for one drive: (a) trajectory, (b) ground truth, (c) initial hypotheses, (d)-(f) decoders, and the baseline."""
+"""Figures of the localization evaluation: the paper's Fig. 9 for one drive (trajectory, ground truth, initial
+hypotheses, every localizer's path) and the distribution of the distance to localized over many starts."""
 
 from __future__ import annotations
 
@@ -7,14 +8,15 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-from matplotlib.collections import LineCollection  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from matplotlib.collections import LineCollection
 
-from topoloc.geometry import point_along  # noqa: E402
-from topoloc.graph.road_graph import RoadGraph  # noqa: E402
-from topoloc.io import atomic_path  # noqa: E402
+from topoloc.geometry import point_along
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.io import atomic_path
+from topoloc.localization.evaluation import quantile
 
 RIGHT, WRONG = "tab:blue", "tab:red"
 
@@ -58,15 +60,15 @@ def _decoded(ax, graph: RoadGraph, sequence: np.ndarray, truth_set: set[int], di
     ax.plot(*point_along(start, graph.edges.length_m.iat[int(sequence[0])] / 2.0), "k^", ms=5, zorder=4)
 
 
-def plot_fig9(graph: RoadGraph, table: pd.DataFrame, frames: pd.DataFrame, corners: np.ndarray | None,
-              initial: list[int], metrics: dict[str, dict[str, float]], path: str | Path, title: str) -> None:
-    """Fig. 9 panels for one drive from its decoded table (:func:`topoloc.localization.localize.decoded_table`)."""
+def plot_fig9(graph: RoadGraph, answers: pd.DataFrame, frames: pd.DataFrame, corners: np.ndarray | None,
+              initial: list[int], metrics: dict[str, dict[str, float]], labels: dict[str, str], path: str | Path,
+              title: str) -> None:
+    """Fig. 9 panels for one drive from frame 0: (a) trajectory, (b) truth, (c) initial hypotheses, then the
+    traced-back path of every localizer in ``answers`` (the rows of the frame-0 run; raw: its online answers)."""
     xy = frames[["x", "y"]].to_numpy(float)
-    truth = table["true_edge_id"].to_numpy() if "true_edge_id" in table.columns else None
-    truth_set = set(int(e) for e in truth) if truth is not None else set()
+    truth_set = set(int(e) for e in frames["edge_id"])
     extent = _extent(graph, xy, truth_set)  # panels with edges off the route zoom out to show them
-    decoders = [name for name in ("raw", "strategy1", "strategy2", "hmm") if f"{name}_path" in table.columns]
-    names = {"raw": "(d) raw RNN argmax", "strategy1": "(e) Strategy 1", "strategy2": "(f) Strategy 2", "hmm": "(g) HMM baseline"}
+    names = list(dict.fromkeys(answers.localizer))[:5]
     fig, axes = plt.subplots(2, 4, figsize=(18, 9.5), dpi=100)
     axes = axes.ravel()
     _base(axes[0], graph, extent, "(a) trajectory: odometry (blue), segments (orange)")
@@ -75,22 +77,47 @@ def plot_fig9(graph: RoadGraph, table: pd.DataFrame, frames: pd.DataFrame, corne
         axes[0].plot(xy[corners, 0], xy[corners, 1], "-o", color="tab:orange", lw=1.0, ms=2.5, zorder=4)
     axes[0].plot(*xy[0], "k^", ms=6, zorder=5)
     _base(axes[1], graph, extent, "(b) ground-truth edges")
-    if truth is not None:
-        _edges(axes[1], graph, sorted(truth_set), "tab:green")
+    _edges(axes[1], graph, sorted(truth_set), "tab:green")
     _base(axes[2], graph, _extent(graph, xy, truth_set | set(initial)), f"(c) top {len(initial)} initial hypotheses")
     _edges(axes[2], graph, initial, [plt.cm.viridis(i / max(1, len(initial))) for i in range(len(initial))], labels=True)
-    for ax, name in zip(axes[3:7], decoders):
+    for index, (ax, name) in enumerate(zip(axes[3:], names)):
+        run = answers[answers.localizer == name]
+        sequence = (run.state if name == "raw" else run.path).to_numpy()
+        sequence = sequence[sequence >= 0]
         m = metrics.get(name, {})
-        col = "raw_online" if name == "raw" else f"{name}_path"
-        sub = f"acc {m.get('path_accuracy', np.nan):.2f}, consistent {m.get('consistency', np.nan):.2f}"
-        if name != "raw":
-            loc = m.get("localized_m", np.nan)
-            sub += f"\nonline acc {m.get('accuracy', np.nan):.2f}, localized " + (f"after {loc:.0f} m" if np.isfinite(loc) else "never")
-        _base(ax, graph, _extent(graph, xy, truth_set | set(table[col].tolist())), f"{names[name]}: {sub}")
-        _decoded(ax, graph, table[col].to_numpy(), truth_set)
-    for ax in axes[3 + len(decoders):]:
+        loc = m.get("localized_m", np.nan)
+        sub = (f"path acc {m.get('path_accuracy', np.nan):.2f}, consistent {m.get('consistency', np.nan):.2f}\n"
+               f"online acc {m.get('accuracy', np.nan):.2f}, localized " + (f"after {loc:.0f} m" if np.isfinite(loc) else "never"))
+        _base(ax, graph, _extent(graph, xy, truth_set | set(sequence.tolist())), f"({chr(ord('d') + index)}) {labels.get(name, name)}: {sub}")
+        if len(sequence):
+            _decoded(ax, graph, sequence, truth_set)
+    for ax in axes[3 + len(names):]:
         ax.axis("off")
-    fig.suptitle(title + "   (decoded edges: blue on the true route, red off it; triangle: start)", fontsize=11)
+    fig.suptitle(title + "   (edges: blue on the true route, red off it; triangle: start)", fontsize=11)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp)
+    plt.close(fig)
+
+
+def plot_cdf(starts: pd.DataFrame, labels: dict[str, str], path: str | Path, title: str) -> None:
+    """Share of the starts localized within each distance driven, per localizer, the oracle dashed."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.8), dpi=110)
+    top = np.nanmax(np.where(np.isfinite(starts.localized_m), starts.localized_m, np.nan)) if starts.localized_m.notna().any() else 1000.0
+    grid = np.linspace(0.0, max(100.0, 1.05 * top), 400)
+    for name, group in starts.groupby("localizer", sort=False):
+        values = group.localized_m.to_numpy(float)
+        share = (values[None, :] <= grid[:, None]).mean(axis=1)  # NaN (never) never counts
+        oracle = name == "oracle"
+        ax.plot(grid, share, ls="--" if oracle else "-", color="k" if oracle else None, lw=2.2 if oracle else 1.6,
+                label=f"{labels.get(name, name)} (median {quantile(values, 50):.0f} m)"
+                if np.isfinite(values).mean() >= 0.5 else f"{labels.get(name, name)} (localized {np.isfinite(values).mean():.0%})")
+    ax.set_xlabel("distance driven from the start (m)")
+    ax.set_ylabel("share of starts localized")
+    ax.set_ylim(0, 1.02)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower right")
+    ax.set_title(title, fontsize=10)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp)

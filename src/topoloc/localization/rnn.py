@@ -59,6 +59,53 @@ def edge_log_probs(model: Any, tokens: NDArray[np.int64], window: int | None = N
     return logp[which, t - starts[which]]
 
 
+class OnlineRNN:
+    """The windowed RNN of :func:`edge_log_probs`, one token at a time (same outputs).
+
+    A window starts every ``stride`` tokens and runs for ``window`` tokens with its own recurrent state;
+    each token's output is read from the oldest window that covers it. ``window=None``: one window.
+    """
+
+    def __init__(self, model: Any, window: int | None = None, stride: int | None = None) -> None:
+        import torch
+
+        self.model, self.window = model.eval(), window
+        self.stride = (window if stride is None else stride) if window is not None else None
+        if window is not None and not 1 <= self.stride <= window:
+            raise InputError("localization.rnn.stride", f"must be between 1 and rnn.window ({window}), got {self.stride}")
+        self._torch = torch
+        self.start()
+
+    def start(self) -> None:
+        """Forget every token."""
+        self.t = 0
+        self.windows: dict[int, Any] = {}  # window start -> recurrent state
+
+    def step(self, token: int) -> NDArray[np.float32]:
+        """Log-probabilities ``(E,)`` of the edge classes after ``token``."""
+        torch = self._torch
+        t = self.t
+        if not self.windows or (self.window is not None and t % self.stride == 0):
+            self.windows[t] = None
+        if self.window is not None:
+            self.windows = {s: h for s, h in self.windows.items() if s > t - self.window}
+        x = torch.as_tensor([[int(token)]])
+        out = None
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            with torch.inference_mode():
+                embedded = self.model.embedding(x)
+                for s in sorted(self.windows):
+                    features, self.windows[s] = self.model.rnn(embedded, self.windows[s])
+                    if out is None:  # the oldest window
+                        out = torch.log_softmax(self.model.head(features[0, 0]).float(), dim=-1).numpy()
+        finally:
+            torch.set_num_threads(threads)
+        self.t += 1
+        return out
+
+
 def load_model(spec: str, tracking_uri: str | None = None) -> Any:
     """The trajectory RNN from a ``.ckpt`` path, an MLflow model URI (``runs:/<id>/model``) or a bare run id.
 

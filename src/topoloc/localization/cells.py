@@ -1,0 +1,216 @@
+"""Positions on a road network as cells of *chains*, and how they move.
+
+A chain is a stretch of road that a vehicle drives from its start to its end:
+a directed edge (a road in a direction its one-way tag allows, see
+:mod:`topoloc.localization.connectivity`), or, for the metric filter, a piece
+of one (:mod:`topoloc.localization.lanes`: the middle of a road, or a *turn*
+from the end of one road into the start of the next). A chain lies on at most
+two directed edges: it starts ``first_from`` metres into ``first_state`` and,
+``split`` metres further, may pass the node into ``second_state``.
+
+Every chain is cut into ``ceil(length / cell_m)`` cells of equal length; a cell
+stands for its centre. Per cell the grid knows its chain, its directed edge,
+its offset along both, its road (undirected edge), its map position and the
+road's heading there: the chord over ``heading_window_m`` around it, clipped to
+its directed edge (so a cell next to an intersection has the heading with
+which its road meets it), turned on turn chains by the share of the turn a
+vehicle has made at that point (a smooth step through the node).
+
+:meth:`CellGrid.moves` lists, for a drive of ``D`` metres from every cell, the
+cells where the vehicle lands and with which probability: along the chain,
+then onto every chain that may follow (equal shares), hop after hop; a
+landing point between two cell centres is split between them (linear
+interpolation). Both localizers on cells (the token HMM baseline and the
+metric filter) build their transitions from it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import NDArray
+
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.localization.connectivity import DirectedEdges
+
+MAX_HOPS = 64
+
+
+@dataclass(frozen=True)
+class Chains:
+    """Chains of a road network (see the module docstring); successors as CSR lists ``next_ptr``, ``next_idx``."""
+
+    length: NDArray[np.float64]
+    next_ptr: NDArray[np.int64]
+    next_idx: NDArray[np.int64]
+    first_state: NDArray[np.int64]
+    first_from: NDArray[np.float64]
+    split: NDArray[np.float64]
+    second_state: NDArray[np.int64]
+    turn: NDArray[np.float64]  #: heading change (radians, counter-clockwise) at the node inside the chain, else 0
+
+    @property
+    def num_chains(self) -> int:
+        return len(self.length)
+
+    @classmethod
+    def of_states(cls, states: DirectedEdges) -> Chains:
+        """One chain per valid directed edge (the cells of the token HMM); invalid states have no cells."""
+        valid = states.valid
+        n = states.num_states
+        return cls(np.where(valid, states.length, 0.0), states.next_ptr, states.next_idx, np.arange(n),
+                   np.zeros(n), states.length.copy(), np.full(n, -1), np.zeros(n))
+
+
+def polyline_headings(coords: NDArray[np.float64], positions: NDArray[np.float64], half: float) -> NDArray[np.float64]:
+    """Travel heading (degrees, counter-clockwise from +x) of a polyline at ``positions`` over +-``half`` metres."""
+    seg = np.hypot(*np.diff(coords, axis=0).T)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    a = np.clip(positions - half, 0.0, cum[-1])
+    b = np.clip(positions + half, 0.0, cum[-1])
+    b = np.where(b - a < 1e-6, np.minimum(a + 1e-3, cum[-1]), b)
+    a = np.where(b - a < 1e-6, np.maximum(b - 1e-3, 0.0), a)
+    dx = np.interp(b, cum, coords[:, 0]) - np.interp(a, cum, coords[:, 0])
+    dy = np.interp(b, cum, coords[:, 1]) - np.interp(a, cum, coords[:, 1])
+    return np.degrees(np.arctan2(dy, dx))
+
+
+def state_coords(graph: RoadGraph, state: int) -> NDArray[np.float64]:
+    """Polyline of a directed edge (state ``2 e`` runs u -> v, ``2 e + 1`` v -> u)."""
+    coords = np.asarray(graph.geometry[state // 2], float)
+    return coords if state % 2 == 0 else coords[::-1]
+
+
+@dataclass(frozen=True)
+class Moves:
+    """Sparse moves of one drive distance: from cell ``src`` to cell ``dst`` with probability ``weight``."""
+
+    src: NDArray[np.int64]
+    dst: NDArray[np.int64]
+    weight: NDArray[np.float64]
+
+
+class CellGrid:
+    """Cells of at most ``cell_m`` metres on every chain of a road graph.
+
+    Attributes, one entry per cell: ``chain``, ``offset`` (metres from the chain's start to the cell
+    centre), ``state`` (directed edge), ``state_offset`` (metres along it), ``edge`` (road id), ``xy``
+    (map position), ``heading`` (degrees counter-clockwise from +x) and ``to_node`` (metres to the
+    nearest end of its directed edge); per chain: ``base`` (its first cell) and ``cell_len``.
+    """
+
+    def __init__(self, graph: RoadGraph, states: DirectedEdges, chains: Chains, cell_m: float,
+                 heading_window_m: float) -> None:
+        if not cell_m > 0:
+            raise ValueError(f"cell_m must be positive, got {cell_m}")
+        self.states, self.chains, self.cell_m = states, chains, float(cell_m)
+        has = chains.length > 0
+        counts = np.zeros(chains.num_chains, np.int64)
+        counts[has] = np.maximum(1, np.ceil(chains.length[has] / cell_m - 1e-9)).astype(np.int64)
+        self.cell_len = np.where(counts > 0, chains.length / np.maximum(counts, 1), 0.0)
+        self.base = np.concatenate([[0], np.cumsum(counts)])
+        self.chain = np.repeat(np.arange(chains.num_chains), counts)
+        self.offset = (np.arange(len(self.chain)) - self.base[self.chain] + 0.5) * self.cell_len[self.chain]
+        since_node = self.offset - chains.split[self.chain]  # metres past the node inside the chain (< 0 before)
+        second = (since_node >= 0) & (chains.second_state[self.chain] >= 0)
+        self.state = np.where(second, chains.second_state[self.chain], chains.first_state[self.chain])
+        self.state_offset = np.where(second, since_node, chains.first_from[self.chain] + self.offset)
+        self.edge = states.edge[self.state]
+        self.xy, plain = self._geometry(graph, heading_window_m / 2.0)
+        self.heading = plain + np.degrees(self._turned_share(since_node, second) * chains.turn[self.chain])
+        self.turn_ramp = self._ramp(since_node)
+        self.prior = self._prior(second)
+
+    def _prior(self, second: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """Uniform over road length: a stretch of road covered by several turn chains shares its length."""
+        ch = self.chains
+        turns = ch.second_state >= 0
+        leaving = np.bincount(ch.first_state[turns], minlength=self.states.num_states)
+        entering = np.bincount(ch.second_state[turns], minlength=self.states.num_states)
+        coverage = np.where(second, entering[self.state], np.where(turns[self.chain], leaving[self.state], 1))
+        prior = self.cell_len[self.chain] / np.maximum(coverage, 1)
+        return prior / prior.sum()
+
+    def _geometry(self, graph: RoadGraph, half: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        xy = np.empty((self.num_cells, 2))
+        heading = np.empty(self.num_cells)
+        order = np.argsort(self.state, kind="stable")
+        bounds = np.searchsorted(self.state[order], np.arange(self.states.num_states + 1))
+        for s in np.flatnonzero(np.diff(bounds)):
+            cells = order[bounds[s]:bounds[s + 1]]
+            coords = state_coords(graph, int(s))
+            pos = self.state_offset[cells]
+            cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(coords, axis=0).T))])
+            xy[cells] = np.column_stack([np.interp(pos, cum, coords[:, 0]), np.interp(pos, cum, coords[:, 1])])
+            heading[cells] = polyline_headings(coords, pos, half)
+        return xy, heading
+
+    def _ramp(self, since_node: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Per cell, the turn of its chain (radians) weighed by nearness to the node: 1 at the node, 0 at the
+        ends of the turn (cells of middles: 0)."""
+        ch = self.chains
+        before = ch.split[self.chain]
+        half = np.maximum(np.minimum(before, ch.length[self.chain] - before), 1e-9)
+        near = np.clip(1.0 - np.abs(since_node) / half, 0.0, 1.0)
+        return np.where(ch.second_state[self.chain] >= 0, near * np.abs(ch.turn[self.chain]), 0.0)
+
+    def _turned_share(self, since_node: NDArray[np.float64], second: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """Share of the chain's turn still to come (< 0 after the node: the part not yet made), per cell."""
+        ch = self.chains
+        before = ch.split[self.chain]
+        after = ch.length[self.chain] - before
+        half = np.maximum(np.minimum(before, after), 1e-9)
+        made = 0.5 + 0.5 * np.sin(0.5 * np.pi * np.clip(since_node / half, -1.0, 1.0))
+        share = np.where(second, made - 1.0, made)
+        return np.where(ch.second_state[self.chain] >= 0, share, 0.0)
+
+    @property
+    def num_cells(self) -> int:
+        return len(self.chain)
+
+    @cached_property
+    def to_node(self) -> NDArray[np.float64]:
+        """Metres from each cell centre to the nearer end of its directed edge."""
+        return np.minimum(self.state_offset, self.states.length[self.state] - self.state_offset)
+
+    def moves(self, distance_m: float) -> Moves:
+        """Where a drive of ``distance_m`` (> 0) from every cell centre lands (see the module docstring)."""
+        ch = self.chains
+        src = np.arange(self.num_cells)
+        c = self.chain.copy()
+        q = self.offset + float(distance_m)
+        w = np.ones(self.num_cells)
+        out: list[tuple[NDArray, NDArray, NDArray]] = []
+        for _ in range(MAX_HOPS):  # hops across chains; stops when every move has landed
+            inside = q < ch.length[c]
+            if inside.any():
+                out.extend(self._land(src[inside], c[inside], q[inside], w[inside]))
+            leave = ~inside
+            if not leave.any():
+                break
+            src, c, q, w = src[leave], c[leave], q[leave] - ch.length[c[leave]], w[leave]
+            counts = ch.next_ptr[c + 1] - ch.next_ptr[c]
+            rep = np.repeat(np.arange(len(c)), counts)
+            offset = np.arange(len(rep)) - np.repeat(np.cumsum(counts) - counts, counts)
+            nxt = ch.next_idx[ch.next_ptr[c][rep] + offset]
+            src, q, w, c = src[rep], q[rep], w[rep] / counts[rep], nxt
+        if not out:
+            empty = np.zeros(0, np.int64)
+            return Moves(empty, empty, np.zeros(0))
+        return Moves(*(np.concatenate(parts) for parts in zip(*out)))
+
+    def _land(self, src: NDArray, c: NDArray, q: NDArray, w: NDArray) -> list[tuple[NDArray, NDArray, NDArray]]:
+        """Split each landing position between the two nearest cell centres of its chain."""
+        n = self.base[c + 1] - self.base[c]
+        x = q / self.cell_len[c] - 0.5
+        lo = np.clip(np.floor(x), 0, n - 1).astype(np.int64)
+        frac = np.clip(x - lo, 0.0, 1.0)
+        hi = np.minimum(lo + 1, n - 1)
+        frac = np.where(hi == lo, 0.0, frac)
+        parts = []
+        for cell, share in ((lo, 1.0 - frac), (hi, frac)):
+            keep = share > 0
+            parts.append((src[keep], self.base[c[keep]] + cell[keep], w[keep] * share[keep]))
+        return parts

@@ -1,0 +1,131 @@
+"""What road localizers share: the map, a drive's odometry, and the observations made from it.
+
+* :class:`RoadMap`: a road graph with its directed-edge connectivity and, for the learned
+  localizers, the trained trajectory RNN; localizers keep their map structures in its cache, so
+  every start of a multi-start evaluation reuses them.
+* :class:`Odometry`: a drive as planar poses (positions and yaw, in any frame: localizers use
+  only the motion), cut at any frame.
+* :class:`Observations`: what a localizer observes of a drive (tokens, odometry steps), each with
+  the frame at which it is complete, so that answers can be compared with the truth.
+"""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.localization.connectivity import DirectedEdges, directed_edges
+from topoloc.localizer import Localizer, Track
+from topoloc.odometry.poses import planar_track, planar_yaw
+from topoloc.odometry.segment_trajectory import encode_track
+
+
+class RoadMap:
+    """A road graph for road localizers: connectivity (``u_turns``, ``max_skip_m``), model, shared cache."""
+
+    def __init__(self, graph: RoadGraph, u_turns: str = "dead_ends", max_skip_m: float | None = None,
+                 model: Any = None) -> None:
+        self.graph, self.u_turns, self.max_skip_m, self.model = graph, u_turns, max_skip_m, model
+        self.cache: dict[Any, Any] = {}
+
+    @cached_property
+    def states(self) -> DirectedEdges:
+        """Directed edges and which may follow which."""
+        return directed_edges(self.graph, self.u_turns, self.max_skip_m)
+
+    def cached(self, key: Any, build: Any) -> Any:
+        """``build()`` once per ``key`` (hashable: a localizer name and its settings)."""
+        if key not in self.cache:
+            self.cache[key] = build()
+        return self.cache[key]
+
+
+@dataclass(frozen=True)
+class Odometry:
+    """A drive's planar odometry: positions ``xy`` (n, 2) in metres and ``yaw`` (n,) in radians, any frame."""
+
+    xy: NDArray[np.float64]
+    yaw: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        if len(self.xy) != len(self.yaw):
+            raise ValueError(f"{len(self.xy)} positions for {len(self.yaw)} headings")
+
+    def __len__(self) -> int:
+        return len(self.xy)
+
+    @classmethod
+    def from_poses(cls, poses: NDArray[np.float64]) -> Odometry:
+        """From KITTI camera poses ``(n, 4, 4)``: the ground-plane track and the optical axis' yaw."""
+        return cls(planar_track(poses), planar_yaw(poses))
+
+    @classmethod
+    def from_track(cls, xy: NDArray[np.float64]) -> Odometry:
+        """From positions alone: the yaw is the direction of motion (reversing cannot be told apart)."""
+        xy = np.asarray(xy, float)
+        step = np.diff(xy, axis=0, append=xy[-1:] + (xy[-1:] - xy[-2:-1] if len(xy) > 1 else 0.0))
+        moving = np.hypot(*step.T) > 1e-9
+        yaw = np.arctan2(step[:, 1], step[:, 0])
+        if moving.any():  # standing frames keep the last direction of motion
+            index = np.maximum.accumulate(np.where(moving, np.arange(len(xy)), -1))
+            first = int(np.argmax(moving))
+            yaw = yaw[np.where(index >= 0, index, first)]
+        return cls(xy, yaw)
+
+    def cut(self, start: int) -> Odometry:
+        """The drive from frame ``start`` on (nothing before it is known)."""
+        return Odometry(self.xy[start:], self.yaw[start:])
+
+    @cached_property
+    def driven_m(self) -> NDArray[np.float64]:
+        """Metres driven up to each frame (path length of the positions)."""
+        return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(self.xy, axis=0).T))])
+
+
+@dataclass(frozen=True)
+class Observations:
+    """What a localizer observes of a drive: one item per update, and the frame at which each is complete."""
+
+    items: list[Any]
+    frame: NDArray[np.int64]
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+
+class RoadLocalizer(Localizer):
+    """A localizer on a :class:`RoadMap`; ``conf`` holds the ``localization``, ``segmentation`` and ``encoding`` slices."""
+
+    @abstractmethod
+    def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
+        """What this localizer observes of ``odometry``."""
+
+    def run_starts(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any],
+                   starts: NDArray[np.int64]) -> list[tuple[int, Observations, Track]]:
+        """The drive from every start frame, nothing before it known: (start, observations with absolute
+        frames, track) per start that gives any observation. Localizers may run all starts at once."""
+        out = []
+        for start in np.asarray(starts, np.int64):
+            observations = self.observe(odometry.cut(int(start)), map, conf)
+            if len(observations) == 0:
+                continue
+            self.reset(map, conf)
+            track = self.run(observations.items)
+            out.append((int(start), Observations(observations.items, observations.frame + int(start), observations.extra), track))
+        return out
+
+
+def token_observations(odometry: Odometry, map: RoadMap, conf: dict[str, Any], bins: int) -> Observations:
+    """The drive's Douglas-Peucker tokens (as the ``segment_trajectory`` stage makes them), with their frames."""
+    seg, enc = conf["segmentation"], conf["encoding"]
+    track = encode_track(odometry.xy, map.graph.virtual_node_spacing_m, bins, float(seg["tolerance_m"]),
+                         float(enc["heading_lookahead_m"]), float(seg["turn_label_offset_m"]), float(seg["corner_skip_m"]))
+    return Observations([int(t) for t in track.encoded.tokens], np.asarray(track.frame, np.int64),
+                        {"kind": track.kind, "place_m": track.place_m})

@@ -1,0 +1,172 @@
+"""One interface for every localizer, and the registry that names them.
+
+A localizer answers, one observation at a time, where the vehicle is:
+
+* :meth:`Localizer.reset` ``(map, conf)`` starts over on a map (a :class:`~topoloc.localization.roadmap.RoadMap`
+  for road localizers, a topometric map for place localizers) with the localizer's config slice;
+  structures that depend only on the map and the config are built once and kept across resets;
+* :meth:`Localizer.update` ``(observation) -> Answer`` takes the next observation (a token, an odometry
+  step, an image frame: see :attr:`Localizer.observes`) and returns the new belief's answer;
+* :meth:`Localizer.answer` returns the current answer: the state (a road id on a road map, a vertex on a
+  topometric map), a map position where the localizer has one, and the confidence;
+* :meth:`Localizer.path` returns, after the last update, the consistent sequence of states traced back
+  (Viterbi, or the best final hypothesis); localizers without one return their online answers.
+
+:func:`run_batch` is the batch form: it feeds a whole sequence of observations and collects a
+:class:`Track`. Subclasses may override :meth:`Localizer.run` with a faster equivalent (the tests check
+that both agree).
+
+Localizers register themselves by name with :func:`register`; the name is the config key, the CLI
+choice and the table row, :attr:`Localizer.label` the label of tables and figures. Every module of the
+package :mod:`topoloc.localizers` is imported by :func:`registry`, so a new localizer is one module
+there (plus its schema entry and its test).
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from topoloc.errors import InputError
+
+#: What a localizer observes, one item per update.
+OBSERVATIONS = ("tokens", "odometry", "images")
+
+
+@dataclass(frozen=True)
+class Answer:
+    """Where the vehicle is after an update.
+
+    ``state``: a road (undirected edge id) on a road map, a vertex on a topometric map; -1 when the
+    localizer has no answer. ``xy``: the map position (projected metres) where the localizer has one,
+    else None. ``confidence``: the probability the localizer gives its answer.
+    """
+
+    state: int
+    confidence: float
+    xy: tuple[float, float] | None = None
+
+
+@dataclass
+class Track:
+    """A localizer's answers over a sequence of observations (one entry per update)."""
+
+    state: NDArray[np.int64]
+    confidence: NDArray[np.float64]
+    xy: NDArray[np.float64]  #: (n, 2), NaN where the localizer gives no position
+    path: NDArray[np.int64]  #: the consistent sequence traced back after the last update
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.state)
+
+    @classmethod
+    def of_answers(cls, answers: Sequence[Answer], path: NDArray[np.int64] | None = None, **extra: Any) -> Track:
+        """A track from the answers of successive updates (``path`` defaults to the answers' states)."""
+        state = np.array([a.state for a in answers], np.int64)
+        xy = np.array([a.xy if a.xy is not None else (np.nan, np.nan) for a in answers], float).reshape(-1, 2)
+        return cls(state, np.array([a.confidence for a in answers], float), xy,
+                   state.copy() if path is None else np.asarray(path, np.int64), dict(extra))
+
+
+class Localizer(ABC):
+    """Base class of all localizers (see the module docstring)."""
+
+    #: Registry name: config key, CLI choice, table row.
+    name: ClassVar[str] = ""
+    #: Label of tables and figures.
+    label: ClassVar[str] = ""
+    #: What one observation is: one of :data:`OBSERVATIONS`.
+    observes: ClassVar[str] = ""
+    #: Whether it needs the trained trajectory RNN (the workflow then trains it first).
+    requires_model: ClassVar[bool] = False
+
+    def __init__(self) -> None:
+        self._map: Any = None
+        self._conf: Any = None
+
+    def reset(self, map: Any, conf: Any) -> None:
+        """Start over on ``map`` with ``conf``; map structures are rebuilt only when either changed."""
+        if map is not self._map or conf != self._conf:
+            self.setup(map, conf)
+            self._map, self._conf = map, conf
+        self.start()
+
+    def setup(self, map: Any, conf: Any) -> None:
+        """Build what depends only on the map and the config (called by :meth:`reset` when they change)."""
+
+    @abstractmethod
+    def start(self) -> None:
+        """Forget every observation: the belief before the first one."""
+
+    @abstractmethod
+    def update(self, observation: Any) -> Answer:
+        """Take one observation; return the new answer."""
+
+    @abstractmethod
+    def answer(self) -> Answer:
+        """The current answer."""
+
+    def path(self) -> NDArray[np.int64] | None:
+        """The consistent state sequence traced back after the last update (None: use the online answers)."""
+        return None
+
+    def summary(self) -> dict[str, Any]:
+        """Facts of the run so far for the stage's statistics (initial hypotheses, restarts, ...)."""
+        return {}
+
+    def run(self, observations: Sequence[Any]) -> Track:
+        """The batch form: :meth:`update` on every observation in turn (call :meth:`reset` first)."""
+        answers = [self.update(obs) for obs in observations]
+        return Track.of_answers(answers, self.path())
+
+
+_REGISTRY: dict[str, type[Localizer]] = {}
+
+
+def register(cls: type[Localizer]) -> type[Localizer]:
+    """Class decorator: make ``cls`` available under ``cls.name``."""
+    if not cls.name or not cls.label or cls.observes not in OBSERVATIONS:
+        raise TypeError(f"{cls.__name__}: a localizer needs a name, a label and observes in {OBSERVATIONS}")
+    if cls.name in _REGISTRY and _REGISTRY[cls.name] is not cls:
+        raise TypeError(f"two localizers are named {cls.name!r}: {_REGISTRY[cls.name].__name__} and {cls.__name__}")
+    _REGISTRY[cls.name] = cls
+    return cls
+
+
+def registry() -> dict[str, type[Localizer]]:
+    """Every registered localizer by name, in registration order (imports :mod:`topoloc.localizers`)."""
+    package = importlib.import_module("topoloc.localizers")
+    for module in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
+        importlib.import_module(f"{package.__name__}.{module.name}")
+    return dict(_REGISTRY)
+
+
+def make(name: str) -> Localizer:
+    """A new localizer of the registered ``name``; KeyError naming the choices otherwise."""
+    known = registry()
+    if name not in known:
+        raise KeyError(f"unknown localizer {name!r}; choose from {sorted(known)}")
+    return known[name]()
+
+
+def check_names(names: Sequence[str], where: str = "localization.localizers") -> list[str]:
+    """``names`` if every one is registered; else InputError naming the first unknown one."""
+    known = registry()
+    for index, name in enumerate(names):
+        if name not in known:
+            raise InputError(f"{where}.{index}", f"unknown localizer {name!r}; choose from {sorted(known)}")
+    return list(names)
+
+
+def run_batch(localizer: Localizer, map: Any, conf: Any, observations: Sequence[Any]) -> Track:
+    """Reset ``localizer`` on ``map`` and run it over ``observations``."""
+    localizer.reset(map, conf)
+    return localizer.run(observations)

@@ -1,0 +1,67 @@
+"""The token HMM baseline (no learning): :class:`topoloc.localization.hmm.CellHMM` as a localizer."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from topoloc.geometry import straight_token
+from topoloc.localization.hmm import CellHMM, HmmParams
+from topoloc.localization.roadmap import (
+    Observations,
+    Odometry,
+    RoadLocalizer,
+    RoadMap,
+    token_observations,
+)
+from topoloc.localizer import Answer, register
+
+
+@register
+class HmmBaseline(RoadLocalizer):
+    """Forward filter over 5 m cells of directed edges from the tokens; Viterbi path."""
+
+    name, label, observes = "hmm", "HMM baseline", "tokens"
+
+    def setup(self, map: RoadMap, conf: dict[str, Any]) -> None:
+        params = HmmParams.from_conf(conf["localization"]["hmm"])
+        bins = int(conf["encoding"]["angle_bins"])
+        self.hmm = map.cached(("hmm", params, bins), lambda: CellHMM(map.graph, map.states, bins, params))
+        self.bins = bins
+
+    def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
+        return token_observations(odometry, map, conf, int(conf["encoding"]["angle_bins"]))
+
+    def start(self) -> None:
+        self.hmm.start()
+        self._answer = Answer(-1, 0.0)
+
+    def update(self, observation: int) -> Answer:
+        edge, confidence = self.hmm.step(int(observation))
+        cells = np.flatnonzero(self.hmm.cell_edge == edge)
+        cell = int(cells[np.argmax(self.hmm.alpha[cells])])
+        self._answer = Answer(edge, confidence, tuple(self.hmm.grid.xy[cell]))
+        return self._answer
+
+    def answer(self) -> Answer:
+        return self._answer
+
+    def path(self) -> np.ndarray | None:
+        if not self.hmm.back:
+            return None
+        cells, _ = self.hmm.trace()
+        return self.hmm.cell_edge[cells]
+
+    def explained(self, tokens: list[int]) -> tuple[float, int]:
+        """Share of the turn tokens that the map's turn along the Viterbi path matches, and their number."""
+        cells, _ = self.hmm.trace()
+        tokens_array = np.asarray(tokens, np.int64)
+        return self.hmm.explained_turns(tokens_array, cells), int(np.sum(tokens_array[1:] != straight_token(self.bins)))
+
+    def summary(self) -> dict[str, Any]:
+        if not self.hmm.back:
+            return {}
+        _, restarts = self.hmm.trace()
+        return {"initial_hypotheses": [int(e) for e in self.hmm.initial], "restarts": int(restarts),
+                "log_evidence": float(self.hmm.log_evidence), "cells": int(self.hmm.num_cells)}

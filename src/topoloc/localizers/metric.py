@@ -1,0 +1,73 @@
+"""The metric filter: a Bayes filter over 2 m positions on the roads, on the odometry itself
+(:mod:`topoloc.localization.metric`)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from topoloc.localization.metric import MetricModel, MetricSettings, odometry_steps
+from topoloc.localization.metric_filter import MetricFilter
+from topoloc.localization.roadmap import Observations, Odometry, RoadLocalizer, RoadMap
+from topoloc.localizer import Answer, Track, register
+
+
+@register
+class MetricLocalizer(RoadLocalizer):
+    """Positions on directed roads every ``cell_m``, moved by the odometry's distance, weighed by its heading."""
+
+    name, label, observes = "metric", "metric filter", "odometry"
+
+    def setup(self, map: RoadMap, conf: dict[str, Any]) -> None:
+        settings = MetricSettings.from_conf(conf["localization"]["metric"])
+        model = map.cached(("metric", settings), lambda: MetricModel(map.graph, map.states, settings))
+        self.filter = MetricFilter(model)
+
+    def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
+        steps = odometry_steps(odometry.xy, odometry.yaw, float(conf["localization"]["metric"]["cell_m"]))
+        return Observations(list(zip(steps.direction.tolist(), steps.yaw.tolist())), steps.frame)
+
+    def start(self) -> None:
+        self.filter.reset()
+
+    def update(self, observation: tuple[int, float]) -> Answer:
+        direction, yaw = observation
+        self.filter.update(int(direction), float(yaw))
+        return self.answer()
+
+    def answer(self) -> Answer:
+        est = self.filter.answer(0)
+        return Answer(est.edge, est.confidence, tuple(est.xy) if est.edge >= 0 else None)
+
+    def run_starts(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any],
+                   starts: np.ndarray) -> list[tuple[int, Observations, Track]]:
+        """All starts at once: one filter per start on the drive's steps (:class:`MetricFilter` with
+        several filters), each started at the first step that ends after its start frame."""
+        self.reset(map, conf)
+        steps = odometry_steps(odometry.xy, odometry.yaw, float(conf["localization"]["metric"]["cell_m"]))
+        starts = np.asarray(starts, np.int64)
+        first = np.searchsorted(steps.frame, starts, side="right")  # the first step that ends after the start
+        keep = first < len(steps)
+        starts, first = starts[keep], first[keep]
+        bank = MetricFilter(self.filter.model, filters=len(starts))
+        answers: list[list[Answer]] = [[] for _ in starts]
+        for j in range(len(steps)):
+            fresh = np.flatnonzero(first == j)
+            if len(fresh):
+                bank.reset(fresh)
+            bank.update(int(steps.direction[j]), float(steps.yaw[j]))
+            for b, est in enumerate(bank.answers()):
+                if first[b] <= j:
+                    answers[b].append(Answer(est.edge, est.confidence, tuple(est.xy) if est.edge >= 0 else None))
+        out = []
+        for b, start in enumerate(starts):
+            cells = bank.trace(b)
+            path = np.where(cells >= 0, bank.grid.edge[np.maximum(cells, 0)], -1)
+            items = list(zip(steps.direction[first[b]:].tolist(), steps.yaw[first[b]:].tolist()))
+            out.append((int(start), Observations(items, steps.frame[first[b]:]), Track.of_answers(answers[b], path)))
+        return out
+
+    def path(self) -> np.ndarray | None:
+        cells = self.filter.trace(0)
+        return np.where(cells >= 0, self.filter.grid.edge[np.maximum(cells, 0)], -1) if len(cells) else None

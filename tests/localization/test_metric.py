@@ -1,0 +1,97 @@
+"""The metric filter on simulated drives of a small map: it localizes, it stays unsure when it should, it batches."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from localization_helpers import irregular_grid
+from trajectory_helpers import random_graph
+
+from topoloc.config import load
+from topoloc.localization.evaluation import DriveTruth, Judge, score_start
+from topoloc.localization.metric import MetricModel, MetricSettings
+from topoloc.localization.metric_filter import MetricFilter
+from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.localization.simulation import NOISE_LEVELS, NoiseLevel, simulate
+from topoloc.localizer import make
+
+NOISELESS = NoiseLevel("none", (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))
+
+
+@pytest.fixture(scope="module")
+def grid():
+    graph, _ = irregular_grid()
+    return graph, RoadMap(graph), {k: load(None)[k] for k in ("localization", "segmentation", "encoding")}
+
+
+def run_metric(road, conf, xy, yaw):
+    localizer = make("metric")
+    odometry = Odometry(xy, yaw)
+    observations = localizer.observe(odometry, road, conf)
+    localizer.reset(road, conf)
+    return observations, localizer.run(observations.items)
+
+
+def score(graph, sim, observations, track):
+    truth = DriveTruth(sim.edge, sim.gt_xy, np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(sim.gt_xy, axis=0).T))]))
+    return score_start(Judge(graph, 5.0), truth, 0, observations.frame, track.state, track.confidence, track.xy, 200.0, 0.9)
+
+
+@pytest.mark.parametrize("level, seed", [("none", 1), ("high", 2)])
+def test_localizes_a_simulated_drive(grid, level, seed):
+    graph, road, conf = grid
+    sim = simulate(graph, 1500.0, NOISELESS if level == "none" else NOISE_LEVELS[level], np.random.default_rng(seed))
+    observations, track = run_metric(road, conf, sim.odo_xy, sim.odo_yaw)
+    m = score(graph, sim, observations, track)
+    assert m["localized_m"] < 600.0, m
+    assert m["accuracy_after"] >= 0.97 and m["position_error_m"] <= 3.0 and m["confident_wrong"] <= 0.02, m
+    assert np.median(track.confidence[-50:]) > 0.9  # sure at the end (the very last steps may cross a node)
+
+
+def test_stop_and_reverse(grid):
+    graph, road, conf = grid
+    sim = simulate(graph, 1500.0, NOISE_LEVELS["medium"], np.random.default_rng(3), pattern="stop_reverse", stop_frames=3000)
+    assert (np.diff(sim.odo_xy, axis=0) == 0).all(axis=1).sum() >= 3000  # five minutes standing still at 10 Hz
+    observations, track = run_metric(road, conf, sim.odo_xy, sim.odo_yaw)
+    back = np.array([d for d, _ in observations.items]) < 0
+    assert 5 <= back.sum() <= 10  # the 15 m driven backwards: about seven steps of 2 m back
+    m = score(graph, sim, observations, track)
+    assert np.isfinite(m["localized_m"]) and m["accuracy_after"] >= 0.95 and m["confident_wrong"] <= 0.02, m
+
+
+def test_unsure_on_a_drive_the_map_cannot_explain(grid):
+    graph, road, conf = grid
+    # zigzags of 60 degree turns every 45 m: a map of right angles has no such turns
+    headings = np.radians(np.repeat(np.where(np.arange(16) % 2 == 0, 30.0, -30.0), 45))
+    xy = np.cumsum(np.column_stack([np.cos(headings), np.sin(headings)]), axis=0)
+    observations, track = run_metric(road, conf, xy, headings)
+    assert (track.confidence[observations.frame > 150] < 0.5).all()
+    # a drive on another map (random junctions and lengths): no confident wrong answer
+    other = random_graph(4, n=16, extra=8)
+    sim = simulate(other, 1200.0, NOISE_LEVELS["low"], np.random.default_rng(4))
+    observations, track = run_metric(road, conf, sim.odo_xy, sim.odo_yaw)
+    assert np.mean(track.confidence >= 0.9) <= 0.02
+
+
+def test_filters_started_together_or_later_agree_with_a_single_filter(grid):
+    graph, road, conf = grid
+    settings = MetricSettings.from_conf(conf["localization"]["metric"])
+    model = MetricModel(graph, road.states, settings)
+    sim = simulate(graph, 600.0, NOISE_LEVELS["medium"], np.random.default_rng(5))
+    localizer = make("metric")
+    steps = localizer.observe(Odometry(sim.odo_xy, sim.odo_yaw), road, conf).items
+    single, late, bank = MetricFilter(model), MetricFilter(model), MetricFilter(model, filters=3)
+    single.reset()
+    bank.reset([0, 1])
+    for j, (direction, yaw) in enumerate(steps):
+        if j == 40:
+            late.reset()
+            bank.reset(2)
+        for f in (single, bank) + ((late,) if j >= 40 else ()):
+            f.update(direction, yaw)
+        answers = bank.answers()
+        for b, reference in ((0, single), (1, single)) + (((2, late),) if j >= 40 else ()):
+            want = reference.answer()
+            assert (answers[b].edge, answers[b].cell) == (want.edge, want.cell)
+            assert answers[b].confidence == pytest.approx(want.confidence, rel=1e-9, abs=1e-12)
+    assert (bank.trace(2) == late.trace()).all()
