@@ -1,8 +1,8 @@
 """The belief of the metric filter (:mod:`topoloc.localization.metric`), for one or many starts of a drive.
 
 A belief is a set of *entries* (in no particular order): a group, a cell, its probability and its heading-offset
-belief (von Mises: mean and concentration), kept only where the probability is at least ``prune`` times the largest. Several *filters*
-(the starts of a multi-start evaluation) share every step, so its cost is paid once per step, not once per
+belief (von Mises: mean and concentration), kept only where the probability is at least ``prune`` times the
+mean entry of its filter. Several *filters* (the starts of a multi-start evaluation) share every step, so its cost is paid once per step, not once per
 start. Within a filter, once the belief is no longer spread over much of the map, it splits into
 ``scale_classes`` *groups*, one per odometry scale error in ``[-scale_error_max, scale_error_max]``: a group
 with scale error ``s`` moves ``1 / (1 + s)`` cells per step on average (an extra or a skipped move now and
@@ -74,7 +74,10 @@ class MetricFilter:
         self.split = np.zeros(self.filters, bool)
         # per filter and step: direction, yaw and the active cells by probability (None while there are many)
         self.history: list[list[tuple[int, float, NDArray[np.int64] | None]]] = [[] for _ in range(self.filters)]
-        self._dense = self.grid.num_cells // 8
+        self._dense = self.grid.num_cells // 8  # entries above which a group moves by one sparse matrix product
+        # entries at or below which a filter splits into its scale classes: once the belief holds a few
+        # percent of the map, where each split entry costs ``classes`` times as much
+        self._split_at = self.grid.num_cells // 32
 
     @property
     def num_cells(self) -> int:
@@ -91,12 +94,6 @@ class MetricFilter:
     def _counts(self, size: int = 1) -> NDArray[np.int64]:
         """Entries of every group (``size`` 1) or filter (``size`` = classes)."""
         return np.bincount(self.group // size, minlength=self.filters * self.classes // size)
-
-    def _filter_max(self, values: NDArray[np.float64], floor: float = 0.0) -> NDArray[np.float64]:
-        """Per filter, the largest of its entries' ``values`` (``floor`` for a filter without entries)."""
-        out = np.full(self.filters, floor, dtype=np.float64)
-        np.maximum.at(out, self.group // self.classes, values)
-        return out
 
     def _merged(self, b: int, fresh: NDArray[np.float64] | None = None) -> tuple[NDArray, ...]:
         """Filter ``b``'s entries summed over its groups (plus ``fresh`` mass of unknown offset per cell), as
@@ -153,7 +150,7 @@ class MetricFilter:
         if self.classes == 1:
             return
         counts = self._counts(self.classes)
-        ready = np.flatnonzero(self.running & ~self.split & (counts > 0) & (counts <= self._dense))
+        ready = np.flatnonzero(self.running & ~self.split & (counts > 0) & (counts <= self._split_at))
         if len(ready) == 0:
             return
         mine = np.isin(self.group // self.classes, ready)
@@ -242,14 +239,16 @@ class MetricFilter:
         self.mean = natural / np.maximum(self.kappa, TINY)
         off_like = model.offmap_density(yaw - self.last_yaw)
         self.last_yaw = np.where(self.running, yaw, self.last_yaw)
-        top = np.maximum(self._filter_max(like), off_like)
-        weight = self.weight * (1.0 - leave) * like / top[filt].astype(REAL)
-        offmap = self.offmap * off_like / top
-        total = np.bincount(filt, weights=weight, minlength=self.filters) + offmap
+        weight = self.weight * ((1.0 - leave) * like)
+        offmap = self.offmap * off_like
+        on_map = np.bincount(filt, weights=weight, minlength=self.filters)
+        total = on_map + offmap
         total = np.where(total > 0, total, 1.0)
         self.weight = weight / total[filt].astype(REAL)
         self.offmap = offmap / total
-        keep = self.weight >= self.prune * self._filter_max(self.weight)[filt]
+        # relative to the mean entry of the filter (a per-filter maximum costs more than the rest of the step)
+        mean_entry = on_map / total / np.maximum(np.bincount(filt, minlength=self.filters), 1)
+        keep = self.weight >= (self.prune * mean_entry)[filt].astype(REAL)
         self.group, self.cell, self.weight, self.kappa, self.mean = self._keep(keep)
         self._split()
         self._remember(direction, yaw)
