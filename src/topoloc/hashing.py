@@ -13,6 +13,7 @@ packages with ``pkgutil.iter_modules`` / ``walk_packages``: every module of
 from __future__ import annotations
 
 import ast
+import functools
 import hashlib
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -77,12 +78,19 @@ def _package_modules(package: str, root: Path) -> Iterator[str]:
         yield ".".join((root.name, *(parts[:-1] if parts[-1] == "__init__" else parts)))
 
 
-def imported_names(file: Path, name: str, root: Path = PACKAGE_ROOT) -> set[str]:
+def imported_names(file: Path, name: str, root: Path = PACKAGE_ROOT) -> frozenset[str]:
     """Dotted names of the package ``root.name`` that module ``name`` (source ``file``) imports.
 
     ``from a import b`` gives both ``a`` and ``a.b`` (``b`` may be a submodule);
     names that are not modules are dropped later by :func:`module_file`.
     """
+    stat = file.stat()
+    return _imported_names(file, name, root, stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=4096)
+def _imported_names(file: Path, name: str, root: Path, mtime_ns: int, size: int) -> frozenset[str]:
+    """:func:`imported_names`, parsed once per version of the file (a workflow digests many closures)."""
     tree = ast.parse(file.read_bytes(), filename=str(file))
     package = name if file.name == "__init__.py" else name.rpartition(".")[0]
     names: set[str] = set()
@@ -112,7 +120,7 @@ def imported_names(file: Path, name: str, root: Path = PACKAGE_ROOT) -> set[str]
             source = module_file(imported, root)
             if source is not None and source.name == "__init__.py":
                 names.update(_package_modules(imported, root))
-    return {n for n in names if n == root.name or n.startswith(root.name + ".")}
+    return frozenset(n for n in names if n == root.name or n.startswith(root.name + "."))
 
 
 def import_closure(module_name: str, root: Path = PACKAGE_ROOT,
