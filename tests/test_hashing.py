@@ -54,7 +54,7 @@ print(json.dumps(loaded))
 def really_loaded() -> dict[str, set[Path]]:
     """Stage module -> files of the topoloc modules that importing it (and its registry discovery) loads."""
     result = subprocess.run([sys.executable, "-c", _PROBE, *STAGES], capture_output=True, text=True, check=True,
-                            cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO / "src")})
+                            cwd=REPO, env={**os.environ, "PYTHONPATH": str(PACKAGE_ROOT.parent)})
     loaded = json.loads(result.stdout)
     return {stage: {Path(f).resolve() for f in files} for stage, files in loaded.items()}
 
@@ -185,6 +185,13 @@ def test_walker_follows_absolute_relative_from_and_discovery_imports(tiny: Path)
     closure = relative(import_closure("pkg.a", tiny, exclude={"pkg.glue"}), tiny)
     assert closure == {"__init__.py", "a.py", "b.py", "sub/__init__.py", "sub/c.py", "sub/d.py", "e.py", "lazy.py",
                        "registry.py", "plugins/__init__.py", "plugins/one.py", "plugins/two.py"}
+
+
+def test_a_new_module_in_a_discovered_package_changes_the_digest(tiny: Path) -> None:
+    before = code_digest_of("pkg.registry", tiny)
+    (tiny / "plugins" / "three.py").write_text("")
+    assert "plugins/three.py" in relative(import_closure("pkg.registry", tiny), tiny)
+    assert code_digest_of("pkg.registry", tiny) != before
 
 
 def test_literal_import_without_pkgutil_is_one_import_not_a_discovery(tiny: Path) -> None:

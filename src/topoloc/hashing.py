@@ -78,19 +78,29 @@ def _package_modules(package: str, root: Path) -> Iterator[str]:
         yield ".".join((root.name, *(parts[:-1] if parts[-1] == "__init__" else parts)))
 
 
-def imported_names(file: Path, name: str, root: Path = PACKAGE_ROOT) -> frozenset[str]:
+def imported_names(file: Path, name: str, root: Path = PACKAGE_ROOT) -> set[str]:
     """Dotted names of the package ``root.name`` that module ``name`` (source ``file``) imports.
 
     ``from a import b`` gives both ``a`` and ``a.b`` (``b`` may be a submodule);
     names that are not modules are dropped later by :func:`module_file`.
     """
     stat = file.stat()
-    return _imported_names(file, name, root, stat.st_mtime_ns, stat.st_size)
+    names, literal_imports, discovers = _parse_imports(file, name, stat.st_mtime_ns, stat.st_size)
+    names = set(names)
+    if discovers:  # the package's modules as they are now (not cached: a new plugin module counts)
+        for imported in literal_imports:
+            source = module_file(imported, root)
+            if source is not None and source.name == "__init__.py":
+                names.update(_package_modules(imported, root))
+    return {n for n in names if n == root.name or n.startswith(root.name + ".")}
 
 
 @functools.lru_cache(maxsize=4096)
-def _imported_names(file: Path, name: str, root: Path, mtime_ns: int, size: int) -> frozenset[str]:
-    """:func:`imported_names`, parsed once per version of the file (a workflow digests many closures)."""
+def _parse_imports(file: Path, name: str, mtime_ns: int, size: int) -> tuple[frozenset[str], frozenset[str], bool]:
+    """Imported names, literal ``import_module`` arguments, and whether the module walks packages.
+
+    Parsed once per version of the file (a workflow digests many closures that share modules).
+    """
     tree = ast.parse(file.read_bytes(), filename=str(file))
     package = name if file.name == "__init__.py" else name.rpartition(".")[0]
     names: set[str] = set()
@@ -114,13 +124,7 @@ def _imported_names(file: Path, name: str, root: Path, mtime_ns: int, size: int)
             elif called == "import_module" and node.args and isinstance(node.args[0], ast.Constant) \
                     and isinstance(node.args[0].value, str):
                 literal_imports.add(node.args[0].value)
-    names |= literal_imports
-    if discovers:
-        for imported in literal_imports:
-            source = module_file(imported, root)
-            if source is not None and source.name == "__init__.py":
-                names.update(_package_modules(imported, root))
-    return frozenset(n for n in names if n == root.name or n.startswith(root.name + "."))
+    return frozenset(names | literal_imports), frozenset(literal_imports), discovers
 
 
 def import_closure(module_name: str, root: Path = PACKAGE_ROOT,
