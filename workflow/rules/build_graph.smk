@@ -16,7 +16,7 @@ rule build_graph:
         ),
     params:
         conf=config["graph"],
-        code=code("osm", "graph"),
+        code=code("topoloc.graph.build_graph"),
     log:
         "results/{region}/logs/build_graph.log",
     benchmark:

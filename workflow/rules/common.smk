@@ -8,7 +8,7 @@ from snakemake.utils import validate
 
 from topoloc.config import validation_message
 from topoloc.errors import InputError
-from topoloc.hashing import code_digest
+from topoloc.hashing import code_digest_of
 from topoloc.osm.download_osm import PYROSM_PREFIX, raw_osm_suffix, region_source
 from topoloc.tracking import INVOCATION_ENV, finish_invocation, new_invocation_id
 
@@ -42,14 +42,10 @@ wildcard_constraints:
 # One id per `snakemake` call; jobs inherit it and hang their MLflow runs under one parent.
 os.environ.setdefault(INVOCATION_ENV, new_invocation_id())
 
-LIBRARY = Path(workflow.basedir) / "src" / "topoloc"
-# Modules every stage runs through; a stage adds its own package.
-COMMON_CODE = ["errors.py", "io.py", "hashing.py", "stage.py", "tracking.py", "geometry.py"]
 
-
-def code(*parts):
-    """Digest of the library code of a stage: editing it reruns the stage."""
-    return code_digest([LIBRARY / part for part in (*COMMON_CODE, *parts)])
+def code(module):
+    """Digest of a stage module's import closure in topoloc (MLflow/stage glue left out): editing it reruns the stage."""
+    return code_digest_of(module)
 
 
 def local_osm_file(wildcards):

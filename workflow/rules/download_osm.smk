@@ -7,7 +7,7 @@ rule download_osm:
         source="results/{region}/osm/source.json",
     params:
         conf={**config["region"], "download": config["download"]},
-        code=code("osm"),
+        code=code("topoloc.osm.download_osm"),
     log:
         "results/{region}/logs/download_osm.log",
     benchmark:

@@ -1,6 +1,4 @@
 # Temporally consistent localization of the test drives, its evaluation, and the HTML report.
-LOCALIZATION_CODE = ["localizer.py", "localizers", "localization", "trajectory/model.py", "trajectory/dataset.py",
-                     "graph/road_graph.py", "encoding.py", "odometry/segment_trajectory.py", "odometry/poses.py"]
 
 
 rule decode_trajectories:
@@ -13,7 +11,7 @@ rule decode_trajectories:
         geojson="results/{region}/localization/{drive}/localization.geojson",
     params:
         conf=lambda wildcards: {k: config[k] for k in ("localization", "segmentation", "encoding")} | {"drive": wildcards.drive},
-        code=code(*LOCALIZATION_CODE),
+        code=code("topoloc.localization.decode_trajectories"),
     log:
         "results/{region}/logs/decode_trajectories_{drive}.log",
     benchmark:
@@ -45,7 +43,7 @@ rule evaluate_localization:
         **fig9_outputs(),
     params:
         conf={"localization": config["localization"], "drives": DRIVES, "region": config["region"]["name"]},
-        code=code(*LOCALIZATION_CODE),
+        code=code("topoloc.localization.evaluate_localization"),
     log:
         "results/{region}/logs/evaluate_localization.log",
     benchmark:

@@ -1,11 +1,4 @@
 # Place recognition under appearance change and topometric teach-and-repeat localization (Cai & Wan).
-# Library code per stage (editing a module reruns exactly the stages that use it).
-PLACE_IMAGE_CODE = ["render", "graph/road_graph.py", "odometry/simulate.py", "odometry/poses.py", "odometry/georef.py",
-                    "place/images.py", "place/render_places.py"]
-PLACE_MODEL_CODE = ["place/render_places.py", "place/images.py", "place/network.py", "place/pairs.py", "training.py",
-                    "place/train_retrieval.py"]
-PLACE_MAP_CODE = ["place/odometry.py", "place/localize.py", "place/topometric_map.py", "place/build_topometric_map.py",
-                  "place/plot.py"]
 
 
 rule render_places:
@@ -26,7 +19,7 @@ rule render_places:
         split="train|teach|repeat",
     params:
         conf=lambda wildcards: place_conf(wildcards.split),
-        code=code(*PLACE_IMAGE_CODE),
+        code=code("topoloc.place.render_places"),
     log:
         "results/{region}/logs/render_places_{split}.log",
     benchmark:
@@ -52,7 +45,7 @@ rule train_retrieval:
     params:
         conf={k: config["place"][k] for k in ("teach_condition", "threads", "pairs", "network", "train")}
         | {"localize": {"window": config["place"]["localize"]["window"]}},
-        code=code(*PLACE_MODEL_CODE, "place/plot.py"),
+        code=code("topoloc.place.train_retrieval"),
     log:
         "results/{region}/logs/train_retrieval.log",
     benchmark:
@@ -81,7 +74,7 @@ rule build_topometric_map:
     params:
         conf={k: config["place"][k] for k in ("seed", "threads", "odometry_noise", "command")}
         | {"localize": {"correlation_size": config["place"]["localize"]["correlation_size"]}},
-        code=code(*PLACE_MODEL_CODE, *PLACE_MAP_CODE, "graph/road_graph.py"),
+        code=code("topoloc.place.build_topometric_map"),
     log:
         "results/{region}/logs/build_topometric_map.log",
     benchmark:
@@ -123,7 +116,7 @@ rule localize_repeat:
         conf={k: config["place"][k] for k in ("seed", "threads", "teach_condition", "repeat_conditions",
                                                "odometry_noise", "localize")}
         | {"train": {"conditions": config["place"]["train"]["conditions"]}},
-        code=code(*PLACE_MODEL_CODE, *PLACE_MAP_CODE, "place/markov.py", "place/localize_repeat.py"),
+        code=code("topoloc.place.localize_repeat"),
     log:
         "results/{region}/logs/localize_repeat.log",
     benchmark:

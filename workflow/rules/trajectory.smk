@@ -1,8 +1,3 @@
-# Library code per stage (editing a module reruns exactly the stages that use it).
-TRAJECTORY_DATA_CODE = ["encoding.py", "trajectory/paths.py", "trajectory/dataset.py", "trajectory/generate_dataset.py",
-                        "odometry/segment_trajectory.py"]
-
-
 rule generate_dataset:
     """DFS training trajectories (exactly dataset.path_nodes map nodes) as angle tokens and edge labels; Table I."""
     input:
@@ -19,7 +14,7 @@ rule generate_dataset:
         ),
     params:
         conf=dataset_conf(),
-        code=code("graph", *TRAJECTORY_DATA_CODE),
+        code=code("topoloc.trajectory.generate_dataset"),
     log:
         "results/{region}/logs/generate_dataset.log",
     benchmark:
@@ -40,7 +35,7 @@ rule train_rnn:
         metrics="results/{region}/model/train_metrics.json",
     params:
         conf={"encoding": config["encoding"], "model": config["model"], "train": config["train"]},
-        code=code(*TRAJECTORY_DATA_CODE, "training.py", "trajectory/model.py", "trajectory/train_rnn.py"),
+        code=code("topoloc.trajectory.train_rnn"),
     log:
         "results/{region}/logs/train_rnn.log",
     benchmark:
@@ -81,7 +76,7 @@ rule evaluate_rnn:
         ),
     params:
         conf={"evaluate": config["evaluate"], "region": config["region"]["name"]},
-        code=code("trajectory/dataset.py", "trajectory/model.py", "trajectory/evaluate_rnn.py"),
+        code=code("topoloc.trajectory.evaluate_rnn"),
     log:
         "results/{region}/logs/evaluate_rnn.log",
     benchmark:
