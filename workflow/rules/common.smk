@@ -8,7 +8,7 @@ from snakemake.utils import validate
 
 from topoloc.config import validation_message
 from topoloc.errors import InputError
-from topoloc.hashing import code_digest_of
+from topoloc.code_digest import code_digest_of
 from topoloc.osm.download_osm import PYROSM_PREFIX, raw_osm_suffix, region_source
 from topoloc.tracking import INVOCATION_ENV, finish_invocation, new_invocation_id
 

@@ -13,7 +13,13 @@ from pathlib import Path
 
 import pytest
 
-from topoloc.hashing import GLUE_MODULES, PACKAGE_ROOT, code_digest_of, import_closure, module_file
+from topoloc.code_digest import (
+    GLUE_MODULES,
+    PACKAGE_ROOT,
+    code_digest_of,
+    import_closure,
+    module_file,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 SCRIPTS = REPO / "workflow" / "scripts"
