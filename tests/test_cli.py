@@ -17,6 +17,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "trajectory"))
 from localization_helpers import irregular_grid
 
 from topoloc.cli import main
+from topoloc.graph.road_graph import RoadGraph
 from topoloc.odometry.poses import poses_from_planar, write_poses
 
 REPO = Path(__file__).resolve().parents[1]
@@ -183,3 +184,24 @@ def test_unexplained_drive_is_a_clear_low_confidence_answer(small_map, capsys, t
     table = pd.read_csv(tmp_path / "z.csv")
     assert (table.confidence[table.driven_m > 150] < 0.5).all()  # once the zigzags begin to tell, never sure
     assert "not sure yet" in out
+
+
+def test_long_stop_and_reversing_stretch(small_map, capsys, tmp_path):
+    """Odometry that stands still for five minutes (10 Hz) and backs up 20 m mid-drive: no crash, still found."""
+    tmp, route_edges = small_map
+    graph_xy = route_track(RoadGraph.load(tmp / "graph.graphml"), ROUTE)
+    step = np.diff(graph_xy, axis=0)
+    yaw = np.append(np.unwrap(np.arctan2(step[:, 1], step[:, 0])), 0.0)
+    yaw[-1] = yaw[-2]
+    k = len(graph_xy) // 2
+    stop = np.repeat(k, 3000)  # five minutes at 10 Hz without moving
+    back = np.arange(k, k - 20, -1)  # reversing 20 m, facing forward
+    order = np.concatenate([np.arange(k), stop, back, np.arange(k - 20, len(graph_xy))])
+    local = graph_xy[order] - graph_xy[0]
+    write_poses(tmp_path / "stop.txt", poses_from_planar(local, yaw[order]))
+    code, _out, err = run_cli(capsys, "--graph", tmp / "graph.graphml", "--poses", tmp_path / "stop.txt", "--out", tmp_path / "s")
+    assert code == 0, err
+    table = pd.read_csv(tmp_path / "s.csv")
+    last = table[table.driven_m < table.driven_m.max() - 15.0].iloc[-1]
+    assert last.edge == route_edges[-1] and last.confidence > 0.9
+    assert (tmp_path / "s.geojson").is_file() and not list(tmp_path.glob("*.tmp*"))
