@@ -123,7 +123,8 @@ rule localize_repeat:
         conf={k: config["place"][k] for k in ("seed", "threads", "teach_condition", "repeat_conditions",
                                                "odometry_noise", "localize")}
         | {"train": {"conditions": config["place"]["train"]["conditions"]}},
-        code=code(*PLACE_MODEL_CODE, *PLACE_MAP_CODE, "place/markov.py", "place/localize_repeat.py"),
+        code=code(*PLACE_MODEL_CODE, *PLACE_MAP_CODE, "place/markov.py", "place/localize_repeat.py", "localizer.py",
+                  "localizers/place_loop.py", "localizers/place_filter.py", "localizers/place_odometry.py"),
     log:
         "results/{region}/logs/localize_repeat.log",
     benchmark:
