@@ -26,6 +26,10 @@ REPO = Path(__file__).resolve().parents[1]
         ("place:\n  train:\n    conditions: [clear_noon, overcast, sunset, rain, fog, night]\n",
          "topoloc: place.train.conditions: keep at least one condition out of training"),
         ("place:\n  localize:\n    filter:\n      floor: 0\n", "topoloc: config key 'place.localize.filter.floor'"),
+        ("place:\n  localize:\n    localizers: [place_loop, metric]\n",
+         "topoloc: place.localize.localizers.1: unknown localizer 'metric'; choose from ['place_filter', "),
+        ("localization:\n  localizers: [metric, place_filter]\n",
+         "topoloc: localization.localizers.1: unknown localizer 'place_filter'; choose from ['hmm', "),
     ],
 )
 def test_bad_config_fails_with_one_line(tmp_path, yaml, expected):

@@ -59,13 +59,13 @@ def _georeference(args: argparse.Namespace, track: np.ndarray, yaw0: float, crs:
 
 
 def _names(args: argparse.Namespace) -> list[str]:
-    from topoloc.localizer import check_names
+    from topoloc.localizer import ROAD_OBSERVATIONS, check_names
 
     names = [n.strip() for n in args.decoder.split(",") if n.strip()]
     if not names:
         raise InputError("--decoder", "name at least one localizer")
     try:
-        return check_names(names, "--decoder")
+        return check_names(names, "--decoder", ROAD_OBSERVATIONS)
     except InputError as err:
         raise InputError("--decoder", err.message) from None
 
@@ -78,7 +78,7 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     from topoloc.localization.localize import check_explained, check_on_map, write_geojson
     from topoloc.localization.rnn import load_model
     from topoloc.localization.roadmap import Odometry, RoadMap
-    from topoloc.localizer import make, registry
+    from topoloc.localizer import ROAD_OBSERVATIONS, make, registry
     from topoloc.odometry.poses import planar_yaw, read_poses
 
     names = _names(args)
@@ -94,7 +94,7 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     track_xy = geo.apply(odometry.xy) if geo is not None else None
     if track_xy is not None:
         check_on_map(graph, track_xy, float(conf["localization"]["max_offmap_m"]), args.poses, args.graph)
-    known = registry()
+    known = registry(ROAD_OBSERVATIONS)
     model = load_model(args.model, args.tracking_uri) if any(known[n].requires_model for n in names) else None
     if model is None and any(known[n].requires_model for n in names):
         raise InputError("--model", f"{', '.join(n for n in names if known[n].requires_model)} needs a trained model")

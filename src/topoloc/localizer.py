@@ -27,7 +27,7 @@ from __future__ import annotations
 import importlib
 import pkgutil
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -38,6 +38,10 @@ from topoloc.errors import InputError
 
 #: What a localizer observes, one item per update.
 OBSERVATIONS = ("tokens", "odometry", "images")
+#: What the localizers on a road map observe (a drive's odometry); the others, on a topometric map, observe images.
+ROAD_OBSERVATIONS = ("tokens", "odometry")
+#: What the place localizers (teach and repeat, on a topometric map) observe: repeat frames.
+PLACE_OBSERVATIONS = ("images",)
 
 
 @dataclass(frozen=True)
@@ -141,25 +145,27 @@ def register(cls: type[Localizer]) -> type[Localizer]:
     return cls
 
 
-def registry() -> dict[str, type[Localizer]]:
-    """Every registered localizer by name, in registration order (imports :mod:`topoloc.localizers`)."""
+def registry(observes: Collection[str] = OBSERVATIONS) -> dict[str, type[Localizer]]:
+    """Every registered localizer that observes one of ``observes`` (default: all) by name, in registration
+    order (imports :mod:`topoloc.localizers`). Road stages pass :data:`ROAD_OBSERVATIONS`."""
     package = importlib.import_module("topoloc.localizers")
     for module in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
         importlib.import_module(f"{package.__name__}.{module.name}")
-    return dict(_REGISTRY)
+    return {name: cls for name, cls in _REGISTRY.items() if cls.observes in observes}
 
 
-def make(name: str) -> Localizer:
-    """A new localizer of the registered ``name``; KeyError naming the choices otherwise."""
-    known = registry()
+def make(name: str, observes: Collection[str] = OBSERVATIONS) -> Localizer:
+    """A new localizer of the registered ``name`` (among those observing ``observes``); KeyError naming the choices otherwise."""
+    known = registry(observes)
     if name not in known:
         raise KeyError(f"unknown localizer {name!r}; choose from {sorted(known)}")
     return known[name]()
 
 
-def check_names(names: Sequence[str], where: str = "localization.localizers") -> list[str]:
-    """``names`` if every one is registered; else InputError naming the first unknown one."""
-    known = registry()
+def check_names(names: Sequence[str], where: str = "localization.localizers",
+                observes: Collection[str] = OBSERVATIONS) -> list[str]:
+    """``names`` if every one is registered (among those observing ``observes``); else InputError naming the first unknown one."""
+    known = registry(observes)
     for index, name in enumerate(names):
         if name not in known:
             raise InputError(f"{where}.{index}", f"unknown localizer {name!r}; choose from {sorted(known)}")

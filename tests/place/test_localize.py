@@ -5,13 +5,30 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from topoloc.config import load
 from topoloc.errors import InputError
-from topoloc.place.localize import (MATCH, NO_MATCH, ODOMETRY, RELOC_FAIL, RELOC_OK, CorrelationScorer,
-                                    LocalizeSettings, correlation_descriptors, localize, nearest_vertex,
-                                    nearest_vertices)
+from topoloc.place.localize import (
+    MATCH,
+    NO_MATCH,
+    ODOMETRY,
+    RELOC_FAIL,
+    RELOC_OK,
+    CorrelationScorer,
+    LocalizeSettings,
+    correlation_descriptors,
+    localize,
+    nearest_vertex,
+    nearest_vertices,
+)
 
 M = 200  # vertices 1 m apart
 VERTEX_S = np.arange(M, dtype=float)
+DEFAULTS = load(None)["place"]["localize"]  # the schema's: the paper's values
+
+
+def settings(**changes) -> LocalizeSettings:
+    """The loop's settings of the default config, with ``changes``."""
+    return LocalizeSettings.from_conf({**DEFAULTS, **changes})
 
 
 class KnownMatches:
@@ -35,10 +52,10 @@ class KnownMatches:
 def test_window_search_odometry_fallback_and_relocalization():
     n = 100
     ds = np.full(n, 1.5)  # odometry 50 % too long: the estimate drifts whenever nothing matches
-    visible = set(range(0, 20)) | {40} | set(range(80, n))
+    visible = set(range(20)) | {40} | set(range(80, n))
     scorer = KnownMatches(visible)
-    trace = localize(VERTEX_S, ds, scorer, LocalizeSettings(threshold=0.8, window=15, lost_frames=30,
-                                                             reloc_images=5, reloc_span=30))
+    trace = localize(VERTEX_S, ds, scorer, settings(threshold=0.8, window=15, lost_frames=30,
+                                                     reloc_images=5, reloc_span=30))
     # 0-19: every frame searched in its window and matched at the true vertex
     assert trace.event[:20] == [MATCH] * 20 and list(trace.vertex[:20]) == list(range(20))
     # 20-39: no score above the threshold: path integration from the last match
@@ -71,7 +88,7 @@ def test_window_search_odometry_fallback_and_relocalization():
 
 def test_true_vertex_outside_the_window_is_not_found():
     ds = np.full(40, 3.0)  # the estimate runs away: after a few frames the truth is outside the window
-    trace = localize(VERTEX_S, ds, KnownMatches({0} | set(range(10, 40))), LocalizeSettings(window=5))
+    trace = localize(VERTEX_S, ds, KnownMatches({0} | set(range(10, 40))), settings(window=5))
     assert trace.event[0] == MATCH
     assert trace.vertex[9] == 27  # 9 frames x 3 m, no match in 1..9
     # frame 10 is at vertex 10, the window is 30 +- 5: no match, the estimate keeps drifting
@@ -82,18 +99,18 @@ def test_relocalization_span_limit_and_threshold_are_strict():
     # frames 0..34 blind; frames 30..34 have global bests spread by exactly 30, then by 31
     for spread, expected in ((30, RELOC_OK), (31, RELOC_FAIL)):
         best = {30: 100, 31: 100 + spread, 32: 110, 33: 105, 34: 101}
-        trace = localize(VERTEX_S, np.ones(35), KnownMatches(set(), best), LocalizeSettings(lost_frames=30))
+        trace = localize(VERTEX_S, np.ones(35), KnownMatches(set(), best), settings(lost_frames=30))
         assert trace.event[34] == expected
         assert trace.event[30] == RELOC_FAIL  # the global bests of frames 26..29 are scattered
     # a score equal to the threshold is not accepted; above it is
-    at = localize(VERTEX_S, np.ones(5), KnownMatches(set(range(5)), peak=0.8), LocalizeSettings(threshold=0.8))
+    at = localize(VERTEX_S, np.ones(5), KnownMatches(set(range(5)), peak=0.8), settings(threshold=0.8))
     assert set(at.event) == {NO_MATCH}
-    above = localize(VERTEX_S, np.ones(5), KnownMatches(set(range(5)), peak=0.81), LocalizeSettings(threshold=0.8))
+    above = localize(VERTEX_S, np.ones(5), KnownMatches(set(range(5)), peak=0.81), settings(threshold=0.8))
     assert set(above.event) == {MATCH}
 
 
 def test_search_at_a_fixed_rate():
-    trace = localize(VERTEX_S, np.ones(12), KnownMatches(set(range(12))), LocalizeSettings(search_every=3))
+    trace = localize(VERTEX_S, np.ones(12), KnownMatches(set(range(12))), settings(search_every=3))
     assert trace.event == [MATCH if t % 3 == 0 else ODOMETRY for t in range(12)]
     assert np.isnan(trace.score[1]) and trace.score[3] == pytest.approx(0.9)
 
@@ -117,9 +134,9 @@ class FalsePeak:
 
 def test_sequence_scoring_rejects_a_single_false_peak():
     ds = np.ones(30)
-    single = localize(VERTEX_S, ds, FalsePeak(20), LocalizeSettings(window=15, sequence_frames=1))
+    single = localize(VERTEX_S, ds, FalsePeak(20), settings(window=15, sequence_frames=1))
     assert single.event[20] == MATCH and single.vertex[20] == 30  # the paper's search jumps to the look-alike
-    seq = localize(VERTEX_S, ds, FalsePeak(20), LocalizeSettings(window=15, sequence_frames=3))
+    seq = localize(VERTEX_S, ds, FalsePeak(20), settings(window=15, sequence_frames=3))
     # the candidate 30 scores (0.99 + 0.1 + 0.1) / 3 with frames 19 and 18 behind it; the truth (0.5 + 0.9 + 0.9) / 3,
     # the best but under the threshold: no jump, odometry keeps the estimate at the truth
     assert seq.event[20] == NO_MATCH and seq.vertex[20] == 20 and seq.score[20] == pytest.approx(2.3 / 3)
@@ -147,10 +164,10 @@ def test_correlation_baseline_scores():
 
 def test_bad_settings_name_the_key():
     with pytest.raises(InputError, match=r"^place.localize.window: "):
-        LocalizeSettings(window=0)
+        settings(window=0)
     with pytest.raises(InputError, match=r"^place.localize.sequence_frames: "):
-        LocalizeSettings(sequence_frames=0)
+        settings(sequence_frames=0)
     with pytest.raises(InputError, match=r"^place.localize.reloc_span: "):
-        LocalizeSettings(reloc_span=-1)
+        settings(reloc_span=-1)
     with pytest.raises(InputError, match=r"^map: "):
-        localize(np.array([]), np.ones(3), KnownMatches(set()))
+        localize(np.array([]), np.ones(3), KnownMatches(set()), settings())

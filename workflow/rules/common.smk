@@ -144,11 +144,12 @@ def decode_inputs(wildcards):
     return inputs
 
 
-from topoloc.localizer import check_names, registry
+from topoloc.localizer import PLACE_OBSERVATIONS, ROAD_OBSERVATIONS, check_names, registry
 
-LOCALIZERS = registry()
+LOCALIZERS = registry(ROAD_OBSERVATIONS)
 try:
-    check_names(config["localization"]["localizers"])
+    check_names(config["localization"]["localizers"], observes=ROAD_OBSERVATIONS)
+    check_names(config["place"]["localize"]["localizers"], "place.localize.localizers", PLACE_OBSERVATIONS)
 except InputError as err:
     _fail(str(err))
 

@@ -28,7 +28,7 @@ from topoloc.localization.evaluation import DriveTruth, start_frames
 from topoloc.localization.localize import write_geojson
 from topoloc.localization.rnn import load_model
 from topoloc.localization.roadmap import Odometry, RoadMap
-from topoloc.localizer import Localizer, check_names, make, registry
+from topoloc.localizer import ROAD_OBSERVATIONS, Localizer, check_names, make, registry
 from topoloc.odometry.poses import read_poses
 
 log = logging.getLogger(__name__)
@@ -59,8 +59,8 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     """Run every configured localizer on drive ``conf['drive']`` from every start; write the answers."""
     loc = conf["localization"]
     names = list(loc["localizers"])
-    known = registry()
-    check_names(names)
+    known = registry(ROAD_OBSERVATIONS)
+    check_names(names, observes=ROAD_OBSERVATIONS)
     graph = RoadGraph.load(inputs["graph"])
     frames = read_frames(inputs["frames"])
     poses = read_poses(inputs["poses"])

@@ -24,17 +24,26 @@ is unchanged. ``sequence_frames: 1`` is the paper's single-image search.
 A *scorer* maps (frame, vertex indices) to scores; the network (probability of "same place") and the
 raw-correlation baseline are both scorers, and so is the hand-made one of the tests. The Bayes filter of
 :mod:`topoloc.place.markov` is the other way to localize with the same scores.
+
+The loop runs online (:class:`WindowSearch`: one :class:`Frame` in, one :class:`Step` out) and in batch
+(:func:`localize`, over a whole drive). :class:`PlaceLocalizer` is the base of the place localizers of
+:mod:`topoloc.localizers` (``place_loop``, ``place_filter``, ``place_odometry``): the interface of
+:mod:`topoloc.localizer` on a topometric map.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from abc import ABC, abstractmethod
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from topoloc.errors import InputError
+from topoloc.localizer import Answer, Localizer, Track
 
 ScoreFn = Callable[[int, NDArray[np.int64]], NDArray[np.float64]]
 
@@ -44,15 +53,15 @@ ODOMETRY, MATCH, NO_MATCH, RELOC_OK, RELOC_FAIL = "odometry", "match", "no_match
 
 @dataclass(frozen=True)
 class LocalizeSettings:
-    """The loop's settings (``place.localize`` in the config); defaults are the paper's where it gives them."""
+    """The loop's settings (``place.localize`` in the config; the paper's values are the schema's defaults)."""
 
-    threshold: float = 0.8
-    window: int = 15
-    search_every: int = 1
-    lost_frames: int = 30
-    reloc_images: int = 5
-    reloc_span: int = 30
-    sequence_frames: int = 1
+    threshold: float
+    window: int
+    search_every: int
+    lost_frames: int
+    reloc_images: int
+    reloc_span: int
+    sequence_frames: int
 
     def __post_init__(self) -> None:
         for key in ("window", "search_every", "lost_frames", "reloc_images", "sequence_frames"):
@@ -60,6 +69,21 @@ class LocalizeSettings:
                 raise InputError(f"place.localize.{key}", f"must be at least 1, got {getattr(self, key)}")
         if int(self.reloc_span) < 0:
             raise InputError("place.localize.reloc_span", f"must be non-negative, got {self.reloc_span}")
+
+    @classmethod
+    def from_conf(cls, loc: dict[str, Any], threshold_key: str = "threshold") -> LocalizeSettings:
+        """Settings of the validated ``place.localize`` slice, with the threshold of ``threshold_key``."""
+        return cls(float(loc[threshold_key]), int(loc["window"]), int(loc["search_every"]), int(loc["lost_frames"]),
+                   int(loc["reloc_images"]), int(loc["reloc_span"]), int(loc["sequence_frames"]))
+
+
+class Step(NamedTuple):
+    """One repeat frame's estimate: vertex, arc length, event, score (the loop: best search score, NaN if none)."""
+
+    vertex: int
+    s: float
+    event: str
+    score: float
 
 
 @dataclass
@@ -70,11 +94,40 @@ class Trace:
     vertex: NDArray[np.int64]
     event: list[str]
     score: NDArray[np.float64]
-    global_best: dict[int, int] = field(default_factory=dict)
+
+    @classmethod
+    def of_steps(cls, steps: Sequence[Step]) -> Trace:
+        """The trace of successive steps."""
+        return cls(np.array([st.s for st in steps], float), np.array([st.vertex for st in steps], np.int64),
+                   [st.event for st in steps], np.array([st.score for st in steps], float))
 
     def count(self, event: str) -> int:
         """Number of frames with ``event``."""
         return sum(e == event for e in self.event)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One repeat frame as a place localizer observes it: ``ds``, the odometry distance driven since the previous
+    frame (ignored on the first), and its image as scores against the map's vertices, frame ``index`` of
+    ``scorer``. Scores are asked for lazily: the loop scores a window, the filter every vertex."""
+
+    ds: float
+    index: int
+    scorer: ScoreFn
+
+    def score(self, vertices: NDArray[np.int64]) -> NDArray[np.float64]:
+        """Scores of this frame against ``vertices``."""
+        return self.scorer(self.index, vertices)
+
+    def row(self) -> NDArray[np.float64]:
+        """Scores of this frame against every vertex (the scorer must be a :class:`Scorer`)."""
+        return self.scorer.row(self.index)  # type: ignore[attr-defined]
+
+
+def drive_frames(ds: NDArray[np.float64], scorer: ScoreFn) -> list[Frame]:
+    """The frames of a drive with odometry distances ``ds`` (``ds[0]`` is ignored) and images scored by ``scorer``."""
+    return [Frame(float(d), t, scorer) for t, d in enumerate(np.asarray(ds, float))]
 
 
 def nearest_vertex(vertex_s: NDArray[np.float64], s: float) -> int:
@@ -106,64 +159,149 @@ def checked_vertex_s(vertex_s: NDArray[np.float64]) -> NDArray[np.float64]:
     return vertex_s
 
 
-def localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], score: ScoreFn,
-             settings: LocalizeSettings = LocalizeSettings()) -> Trace:
-    """Run the loop of the module docstring over ``len(ds)`` repeat frames (``ds[0]`` is ignored)."""
-    vertex_s = checked_vertex_s(vertex_s)
-    n, m = len(ds), len(vertex_s)
-    everything = np.arange(m, dtype=np.int64)
-    driven = np.concatenate([[0.0], np.cumsum(np.asarray(ds, float)[1:])])  # the repeat's odometry arc length
-    trace = Trace(np.zeros(n), np.zeros(n, np.int64), [], np.full(n, np.nan))
-    s = float(vertex_s[0])
-    since_match = 0
+class WindowSearch:
+    """The loop of the module docstring, one repeat frame at a time (:meth:`start`, then :meth:`step` per frame)."""
 
-    def best_global(k: int) -> int:
-        if k not in trace.global_best:
-            trace.global_best[k] = int(np.argmax(score(k, everything)))
-        return trace.global_best[k]
+    def __init__(self, vertex_s: NDArray[np.float64], settings: LocalizeSettings) -> None:
+        self.vertex_s, self.settings = checked_vertex_s(vertex_s), settings
+        self.everything = np.arange(len(self.vertex_s), dtype=np.int64)
+        self.start()
 
-    def window_scores(t: int, window: NDArray[np.int64]) -> NDArray[np.float64]:
-        total = np.asarray(score(t, window), float)
-        frames = range(t - 1, max(-1, t - settings.sequence_frames), -1)
-        for k in frames:
-            total = total + np.asarray(score(k, nearest_vertices(vertex_s, vertex_s[window] - (driven[t] - driven[k]))), float)
-        return total / (1 + len(frames))
+    def start(self) -> None:
+        """Back at vertex 0 before the first frame."""
+        self.t, self.s, self.since_match, self.driven = -1, float(self.vertex_s[0]), 0, 0.0
+        # the frames the sequence scores and the relocalization look back on, with the repeat's odometry arc length
+        self.recent: deque[tuple[Frame, float]] = deque(maxlen=max(self.settings.sequence_frames, self.settings.reloc_images))
+        self.global_best: dict[int, int] = {}  # best vertex of a recent frame against all vertices, by frame number
 
-    for t in range(n):
+    def _recent(self, k: int) -> tuple[Frame, float]:
+        return self.recent[len(self.recent) - 1 - (self.t - k)]
+
+    def _best_global(self, k: int) -> int:
+        if k not in self.global_best:
+            self.global_best[k] = int(np.argmax(self._recent(k)[0].score(self.everything)))
+        return self.global_best[k]
+
+    def _window_scores(self, window: NDArray[np.int64]) -> NDArray[np.float64]:
+        t, vertex_s = self.t, self.vertex_s
+        total = np.asarray(self._recent(t)[0].score(window), float)
+        earlier = range(t - 1, max(-1, t - self.settings.sequence_frames), -1)
+        for k in earlier:
+            frame, driven = self._recent(k)
+            total = total + np.asarray(frame.score(nearest_vertices(vertex_s, vertex_s[window] - (self.driven - driven))), float)
+        return total / (1 + len(earlier))
+
+    def step(self, frame: Frame) -> Step:
+        """Take the next repeat frame; return its estimate."""
+        settings, vertex_s = self.settings, self.vertex_s
+        self.t += 1
+        t = self.t
         if t > 0:
-            s += float(ds[t])
-            since_match += 1
-        v = nearest_vertex(vertex_s, s)
-        event = ODOMETRY
+            self.s += float(frame.ds)
+            self.driven += float(frame.ds)
+            self.since_match += 1
+        self.recent.append((frame, self.driven))
+        for k in [k for k in self.global_best if k <= t - settings.reloc_images]:
+            del self.global_best[k]  # never looked at again
+        v, event, score = nearest_vertex(vertex_s, self.s), ODOMETRY, float("nan")
         if t % settings.search_every == 0:
-            if since_match >= settings.lost_frames and t + 1 >= settings.reloc_images:
-                best = [best_global(k) for k in range(t - settings.reloc_images + 1, t + 1)]
+            if self.since_match >= settings.lost_frames and t + 1 >= settings.reloc_images:
+                best = [self._best_global(k) for k in range(t - settings.reloc_images + 1, t + 1)]
                 if max(best) - min(best) <= settings.reloc_span:
-                    v, s, since_match, event = best[-1], float(vertex_s[best[-1]]), 0, RELOC_OK
+                    v, self.s, self.since_match, event = best[-1], float(vertex_s[best[-1]]), 0, RELOC_OK
                 else:
                     event = RELOC_FAIL
             else:
-                window = np.arange(max(0, v - settings.window), min(m, v + settings.window + 1), dtype=np.int64)
-                scores = window_scores(t, window)
+                window = np.arange(max(0, v - settings.window), min(len(vertex_s), v + settings.window + 1), dtype=np.int64)
+                scores = self._window_scores(window)
                 j = int(np.argmax(scores))
-                trace.score[t] = scores[j]
+                score = float(scores[j])
                 if scores[j] > settings.threshold:
-                    v, s, since_match, event = int(window[j]), float(vertex_s[window[j]]), 0, MATCH
+                    v, self.s, self.since_match, event = int(window[j]), float(vertex_s[window[j]]), 0, MATCH
                 else:
                     event = NO_MATCH
-        trace.s[t], trace.vertex[t] = s, v
-        trace.event.append(event)
-    return trace
+        return Step(v, self.s, event, score)
 
 
-class NetworkScorer:
+def localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], score: ScoreFn, settings: LocalizeSettings) -> Trace:
+    """Run the loop of the module docstring over ``len(ds)`` repeat frames (``ds[0]`` is ignored)."""
+    search = WindowSearch(vertex_s, settings)
+    return Trace.of_steps([search.step(frame) for frame in drive_frames(ds, score)])
+
+
+class PathIntegration:
+    """Odometry alone from vertex 0, one frame at a time: the reference without retrieval."""
+
+    def __init__(self, vertex_s: NDArray[np.float64]) -> None:
+        self.vertex_s = checked_vertex_s(vertex_s)
+        self.start()
+
+    def start(self) -> None:
+        """Back at vertex 0 before the first frame."""
+        self.t, self.driven = -1, 0.0
+
+    def step(self, frame: Frame) -> Step:
+        """Take the next repeat frame (only its odometry); return its estimate."""
+        self.t += 1
+        if self.t > 0:
+            self.driven += float(frame.ds)
+        s = float(self.vertex_s[0] + self.driven)
+        return Step(nearest_vertex(self.vertex_s, s), s, ODOMETRY, float("nan"))
+
+
+def dead_reckoning(vertex_s: NDArray[np.float64], ds: NDArray[np.float64]) -> Trace:
+    """Path integration alone from vertex 0 over ``len(ds)`` frames (``ds[0]`` is ignored)."""
+    integration = PathIntegration(vertex_s)
+    return Trace.of_steps([integration.step(frame) for frame in drive_frames(ds, _no_scores)])
+
+
+def _no_scores(t: int, idx: NDArray[np.int64]) -> NDArray[np.float64]:
+    raise InputError("scores", "path integration looks at no image")
+
+
+class Scorer(ABC):
+    """Scores of the repeat images (by frame) against the map's vertices, higher where more alike."""
+
+    @abstractmethod
+    def __call__(self, t: int, idx: NDArray[np.int64]) -> NDArray[np.float64]:
+        """Frame ``t`` against the vertices ``idx``."""
+
+    @abstractmethod
+    def matrix(self) -> NDArray[np.float64]:
+        """Every frame against every vertex, (frames, vertices), computed at once."""
+
+    def row(self, t: int) -> NDArray[np.float64]:
+        """Frame ``t`` against every vertex: a row of :meth:`matrix`, computed on first use for all frames of the
+        drive at once (a recorded drive's frames are all known; one matrix is faster than a row per frame)."""
+        if getattr(self, "_matrix", None) is None:
+            self._matrix = self.matrix()
+        return self._matrix[t]
+
+
+class MatrixScorer(Scorer):
+    """Scores given as a (frames, vertices) matrix."""
+
+    def __init__(self, scores: NDArray[np.float64]) -> None:
+        self.scores = scores
+
+    def __call__(self, t: int, idx: NDArray[np.int64]) -> NDArray[np.float64]:
+        return self.scores[t, idx]
+
+    def matrix(self) -> NDArray[np.float64]:
+        return self.scores
+
+
+class NetworkScorer(Scorer):
     """Scores of the siamese network: P(same place) of a repeat embedding against vertex embeddings."""
 
-    def __init__(self, model: object, queries: NDArray[np.float32], vertices: NDArray[np.float32]) -> None:
+    def __init__(self, model: Any, queries: NDArray[np.float32], vertices: NDArray[np.float32]) -> None:
         self.model, self.queries, self.vertices = model, queries, vertices
 
     def __call__(self, t: int, idx: NDArray[np.int64]) -> NDArray[np.float64]:
         return np.asarray(self.model.same_place(self.queries[t], self.vertices[idx]), float)
+
+    def matrix(self) -> NDArray[np.float64]:
+        return self.model.score_matrix(self.queries, self.vertices)
 
 
 def correlation_descriptors(images: NDArray[np.uint8], size: tuple[int, int]) -> NDArray[np.float32]:
@@ -179,7 +317,7 @@ def correlation_descriptors(images: NDArray[np.uint8], size: tuple[int, int]) ->
     return out
 
 
-class CorrelationScorer:
+class CorrelationScorer(Scorer):
     """Baseline scores: normalised cross-correlation of downsampled images (in [-1, 1])."""
 
     def __init__(self, queries: NDArray[np.float32], vertices: NDArray[np.float32]) -> None:
@@ -187,3 +325,51 @@ class CorrelationScorer:
 
     def __call__(self, t: int, idx: NDArray[np.int64]) -> NDArray[np.float64]:
         return (self.vertices[idx] @ self.queries[t]).astype(float)
+
+    def matrix(self) -> NDArray[np.float64]:
+        return self.queries @ self.vertices.T
+
+
+class PlaceLocalizer(Localizer):
+    """A localizer on a topometric map (teach and repeat): the map is a
+    :class:`~topoloc.place.topometric_map.TopometricMap` (its vertex arc lengths ``s`` and positions ``xy``),
+    one observation a :class:`Frame`, ``conf`` the validated ``place.localize`` slice, whose ``threshold`` is on
+    the scale of the frames' scores. The answer's state is a vertex, ``xy`` its position on the map; the
+    batch form's :class:`~topoloc.localizer.Track` holds the :class:`Trace` as ``extra["trace"]``.
+    """
+
+    observes = "images"
+    #: Row of the ``localize_repeat`` tables, ``{scores}`` standing for the scorer (``siamese network``,
+    #: ``raw correlation``). Without ``{scores}`` the localizer looks at no image and runs once per drive.
+    row: ClassVar[str] = ""
+    #: The same for the names of the stage's metrics (``{scores}``: ``network``, ``correlation``).
+    metric: ClassVar[str] = ""
+
+    def setup(self, map: Any, conf: dict[str, Any]) -> None:
+        self.vertex_s, self.xy = checked_vertex_s(map.s), np.asarray(map.xy, float)
+
+    def start(self) -> None:
+        self._answer, self.last = Answer(-1, 0.0), None
+
+    @abstractmethod
+    def step(self, frame: Frame) -> Step:
+        """The estimate after ``frame``."""
+
+    def confidence(self, step: Step) -> float:
+        """The confidence of ``step``'s vertex."""
+        return 0.0
+
+    def update(self, observation: Frame) -> Answer:
+        self.last = self.step(observation)
+        self._answer = Answer(self.last.vertex, self.confidence(self.last), tuple(self.xy[self.last.vertex]))
+        return self._answer
+
+    def answer(self) -> Answer:
+        return self._answer
+
+    def run(self, observations: Sequence[Frame]) -> Track:
+        answers, steps = [], []
+        for frame in observations:
+            answers.append(self.update(frame))
+            steps.append(self.last)
+        return Track.of_answers(answers, self.path(), trace=Trace.of_steps(steps))

@@ -1,17 +1,18 @@
 """Stage ``localize_repeat``: the repeat drives localized on the teach map, per condition, network vs baseline.
 
 Per repeat condition the drive's odometry is drawn from the noise model (an independent scale error per
-drive, :mod:`topoloc.place.odometry`) and the loop of :mod:`topoloc.place.localize` runs with
+drive, :mod:`topoloc.place.odometry`) and the place localizers of ``localize.localizers`` (registry names,
+:mod:`topoloc.localizers`: ``place_loop``, the paper's loop of :mod:`topoloc.place.localize`;
+``place_filter``, beyond the paper, the Bayes filter of :mod:`topoloc.place.markov`, settings
+``localize.filter``; ``place_odometry``, path integration alone, the reference) run on the frames scored by
 
 * **siamese network**: the network's probability of "same place" on the backbone embeddings, threshold
   ``localize.threshold`` (paper: 0.8);
 * **raw correlation** (baseline): normalised cross-correlation of grey images downsampled to
-  ``localize.correlation_size``, threshold ``localize.correlation_threshold``;
-* **odometry only** (reference): path integration alone, no retrieval;
+  ``localize.correlation_size``, threshold ``localize.correlation_threshold``.
 
-and, beyond the paper, the network and the baseline again in the Bayes filter of
-:mod:`topoloc.place.markov` (``+ filter``: the same scores over all vertices, settings
-``localize.filter``).
+A localizer's table row is its ``row`` with the scorer's name (``siamese network``, ``siamese network +
+filter``, ...); one that looks at no image (``odometry only``) runs once per condition.
 
 A frame is localized within ``r`` metres when the ground-truth position of its estimated vertex is within
 ``r`` of the repeat frame's ground truth. Outputs: per-frame results (``frames``), a per-condition summary
@@ -23,7 +24,7 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import pandas as pd
@@ -32,39 +33,36 @@ from numpy.typing import NDArray
 
 from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json, write_text
+from topoloc.localizer import PLACE_OBSERVATIONS, check_names, make, run_batch
 from topoloc.place.images import PlaceSet
-from topoloc.place.localize import (MATCH, RELOC_FAIL, RELOC_OK, CorrelationScorer, LocalizeSettings, NetworkScorer,
-                                    Trace, correlation_descriptors, localize, nearest_vertex)
-from topoloc.place.markov import FilterSettings, markov_localize
+from topoloc.place.localize import (
+    MATCH,
+    RELOC_FAIL,
+    RELOC_OK,
+    CorrelationScorer,
+    NetworkScorer,
+    PlaceLocalizer,
+    Scorer,
+    Trace,
+    correlation_descriptors,
+    drive_frames,
+)
 from topoloc.place.odometry import noisy_odometry
 from topoloc.place.render_places import check_conditions
 from topoloc.place.topometric_map import TopometricMap
 
 log = logging.getLogger(__name__)
 
-METHODS = ("siamese network", "siamese network + filter", "raw correlation", "raw correlation + filter", "odometry only")
-SHORT_NAMES = dict(zip(METHODS, ("network", "network_filter", "correlation", "correlation_filter", "odometry")))
+#: The scorers: table name, metric name, the ``place.localize`` key of the loop's threshold on their scale.
+SCORERS = (("siamese network", "network", "threshold"), ("raw correlation", "correlation", "correlation_threshold"))
 
 
-def settings_from(conf: dict[str, Any], threshold_key: str = "threshold") -> LocalizeSettings:
-    """Loop settings from the ``place.localize`` slice, with the threshold of ``threshold_key``."""
-    loc = conf["localize"]
-    return LocalizeSettings(float(loc[threshold_key]), int(loc["window"]), int(loc["search_every"]),
-                            int(loc["lost_frames"]), int(loc["reloc_images"]), int(loc["reloc_span"]),
-                            int(loc["sequence_frames"]))
-
-
-def filter_settings(conf: dict[str, Any]) -> FilterSettings:
-    """Bayes filter settings from the ``place.localize.filter`` slice."""
-    f = conf["localize"]["filter"]
-    return FilterSettings(float(f["floor"]), float(f["mixing"]), float(f["motion_sigma_m"]), float(f["motion_sigma_rel"]))
-
-
-def dead_reckoning(vertex_s: NDArray[np.float64], ds: NDArray[np.float64]) -> Trace:
-    """Path integration alone from vertex 0: the reference without retrieval."""
-    s = vertex_s[0] + np.cumsum(np.concatenate([[0.0], np.asarray(ds, float)[1:]]))
-    vertex = np.array([nearest_vertex(vertex_s, v) for v in s], np.int64)
-    return Trace(s, vertex, ["odometry"] * len(s), np.full(len(s), np.nan))
+def methods(localizers: list[PlaceLocalizer]) -> list[tuple[str, str, PlaceLocalizer, int | None]]:
+    """(table row, metric name, localizer, scorer index or None) of every run per condition, in table order:
+    every localizer that scores images with each scorer in turn, then those that look at no image."""
+    runs = [(loc.row.format(scores=name), loc.metric.format(scores=short), loc, k)
+            for k, (name, short, _) in enumerate(SCORERS) for loc in localizers if "{scores}" in loc.row]
+    return runs + [(loc.row, loc.metric, loc, None) for loc in localizers if "{scores}" not in loc.row]
 
 
 def frame_table(trace: Trace, topo: TopometricMap, gt_xy: NDArray[np.float64], condition: str, method: str) -> pd.DataFrame:
@@ -130,10 +128,11 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     missing = [c for c in names["repeat"] if c not in repeat.conditions]
     if missing:
         raise InputError("place.repeat_conditions", f"{missing} not rendered in {inputs['repeat']}")
-    vertex_s = topo.s
-    net_settings, corr_settings = settings_from(conf), settings_from(conf, "correlation_threshold")
-    filter_conf = filter_settings(conf)
-    size = tuple(conf["localize"]["correlation_size"])
+    loc = conf["localize"]
+    localizers = check_names(loc["localizers"], "place.localize.localizers", PLACE_OBSERVATIONS)
+    runs = methods([cast(PlaceLocalizer, make(name, PLACE_OBSERVATIONS)) for name in localizers])
+    short_names = {method: short for method, short, _, _ in runs}
+    size = tuple(loc["correlation_size"])
     if topo.descriptor.shape[1] != size[0] * size[1]:
         raise InputError("place.localize.correlation_size", f"{size} differs from the map's descriptors (rebuild the map)")
     tables, embed_s, embedded = [], 0.0, 0
@@ -144,19 +143,16 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         queries = model.embed(images)
         embed_s += time.perf_counter() - started
         embedded += len(images)
-        descriptors = correlation_descriptors(images, size)
-        traces = {
-            "siamese network": localize(vertex_s, odometry.ds, NetworkScorer(model, queries, topo.embedding), net_settings),
-            "siamese network + filter": markov_localize(vertex_s, odometry.ds, model.score_matrix(queries, topo.embedding),
-                                                        filter_conf),
-            "raw correlation": localize(vertex_s, odometry.ds, CorrelationScorer(descriptors, topo.descriptor), corr_settings),
-            "raw correlation + filter": markov_localize(vertex_s, odometry.ds, descriptors @ topo.descriptor.T, filter_conf),
-            "odometry only": dead_reckoning(vertex_s, odometry.ds),
-        }
-        for method, trace in traces.items():
-            tables.append(frame_table(trace, topo, repeat.xy, condition, method))
+        scorers: list[Scorer] = [NetworkScorer(model, queries, topo.embedding),
+                                 CorrelationScorer(correlation_descriptors(images, size), topo.descriptor)]
+        observed = [drive_frames(odometry.ds, scorer) for scorer in scorers]
+        for method, _, localizer, scorer in runs:
+            scorer = 0 if scorer is None else scorer  # a localizer that looks at no image reads only the odometry
+            # the loop's threshold is on the scale of the scores: the network's threshold, or the baseline's
+            track = run_batch(localizer, topo, {**loc, "threshold": loc[SCORERS[scorer][2]]}, observed[scorer])
+            tables.append(frame_table(track.extra["trace"], topo, repeat.xy, condition, method))
         log.info("%s: %s", condition, {m: round(float(np.mean(t.error_m <= 5.0)), 3) for m, t in
-                                       ((tab.method.iat[0], tab) for tab in tables[-len(traces):])})
+                                       ((tab.method.iat[0], tab) for tab in tables[-len(runs):])})
     frames = pd.concat(tables, ignore_index=True)
     summary = summarize(frames)
     summary.insert(1, "held_out", summary.condition.isin(names["held_out"]))
@@ -172,10 +168,10 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     metrics = dict(facts)
     for row in summary.itertuples():
         for key in ("within_5m", "within_2m", "relocalizations", "false_matches", "median_error_m"):
-            metrics[f"{SHORT_NAMES[row.method]}_{key}_{row.condition}"] = float(getattr(row, key))
+            metrics[f"{short_names[row.method]}_{key}_{row.condition}"] = float(getattr(row, key))
     for method, g in summary.groupby("method"):
-        metrics[f"{SHORT_NAMES[method]}_within_5m_mean"] = float(g.within_5m.mean())
-        metrics[f"{SHORT_NAMES[method]}_within_5m_min"] = float(g.within_5m.min())
-        metrics[f"{SHORT_NAMES[method]}_within_2m_mean"] = float(g.within_2m.mean())
+        metrics[f"{short_names[method]}_within_5m_mean"] = float(g.within_5m.mean())
+        metrics[f"{short_names[method]}_within_5m_min"] = float(g.within_5m.min())
+        metrics[f"{short_names[method]}_within_2m_mean"] = float(g.within_2m.mean())
     write_json(outputs["metrics"], metrics)
     return metrics

@@ -21,13 +21,14 @@ passes the same place twice do not move the estimate unless the frames that foll
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
 
 from topoloc.errors import InputError
-from topoloc.place.localize import Trace, checked_vertex_s
+from topoloc.place.localize import MatrixScorer, Step, Trace, checked_vertex_s, drive_frames
 
 FILTER = "filter"  # the event of every frame of a filter trace
 
@@ -36,10 +37,10 @@ FILTER = "filter"  # the event of every frame of a filter trace
 class FilterSettings:
     """The filter's settings (``place.localize.filter`` in the config)."""
 
-    floor: float = 0.05
-    mixing: float = 1e-3
-    motion_sigma_m: float = 0.5
-    motion_sigma_rel: float = 0.05
+    floor: float
+    mixing: float
+    motion_sigma_m: float
+    motion_sigma_rel: float
 
     def __post_init__(self) -> None:
         if not self.floor > 0:
@@ -49,6 +50,11 @@ class FilterSettings:
         for key in ("motion_sigma_m", "motion_sigma_rel"):
             if getattr(self, key) < 0:
                 raise InputError(f"place.localize.filter.{key}", f"must be non-negative, got {getattr(self, key)}")
+
+    @classmethod
+    def from_conf(cls, conf: dict[str, Any]) -> FilterSettings:
+        """Settings of the validated ``place.localize.filter`` slice."""
+        return cls(float(conf["floor"]), float(conf["mixing"]), float(conf["motion_sigma_m"]), float(conf["motion_sigma_rel"]))
 
 
 def predict(belief: NDArray[np.float64], vertex_s: NDArray[np.float64], ds: float, settings: FilterSettings,
@@ -63,27 +69,44 @@ def predict(belief: NDArray[np.float64], vertex_s: NDArray[np.float64], ds: floa
     return (1.0 - settings.mixing) * moved + settings.mixing / len(belief)
 
 
+class BayesFilter:
+    """The filter of the module docstring, one repeat frame at a time (:meth:`start`, then :meth:`step` per frame)."""
+
+    def __init__(self, vertex_s: NDArray[np.float64], settings: FilterSettings) -> None:
+        self.vertex_s, self.settings = checked_vertex_s(vertex_s), settings
+        spacing = float(np.median(np.diff(self.vertex_s))) if len(self.vertex_s) > 1 else 1.0
+        self.spacing = spacing if spacing > 0 else 1.0
+        self.start()
+
+    def start(self) -> None:
+        """All belief at vertex 0 before the first frame."""
+        self.t = -1
+        self.belief = np.zeros(len(self.vertex_s))
+        self.belief[0] = 1.0
+
+    def step(self, ds: float, scores: NDArray[np.float64]) -> Step:
+        """Take the next frame: ``ds`` metres driven since the last (ignored on the first), ``scores`` against every
+        vertex; return the vertex of highest belief with its belief as the score."""
+        scores = np.asarray(scores, float)
+        if scores.shape != self.belief.shape:
+            raise InputError("scores", f"expected {self.belief.shape} (one per vertex), got {scores.shape}")
+        self.t += 1
+        if self.t > 0:
+            self.belief = predict(self.belief, self.vertex_s, float(ds), self.settings, self.spacing)
+        self.belief = self.belief * (self.settings.floor + np.clip(scores, 0.0, 1.0))
+        self.belief /= self.belief.sum()
+        v = int(np.argmax(self.belief))
+        return Step(v, float(self.vertex_s[v]), FILTER, float(self.belief[v]))
+
+
 def markov_localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], scores: NDArray[np.float64],
-                    settings: FilterSettings = FilterSettings()) -> Trace:
+                    settings: FilterSettings) -> Trace:
     """Filter ``len(ds)`` repeat frames with ``scores`` (frames, vertices) in [0, 1]; ``ds[0]`` is ignored.
 
     The trace's ``score`` is the belief of the estimated vertex; ``event`` is ``filter`` throughout.
     """
-    vertex_s = checked_vertex_s(vertex_s)
+    bayes = BayesFilter(vertex_s, settings)
     scores = np.asarray(scores, float)
-    n, m = len(ds), len(vertex_s)
-    if scores.shape != (n, m):
-        raise InputError("scores", f"expected {(n, m)} (frames, vertices), got {scores.shape}")
-    spacing = float(np.median(np.diff(vertex_s))) if m > 1 else 1.0
-    spacing = spacing if spacing > 0 else 1.0
-    belief = np.zeros(m)
-    belief[0] = 1.0
-    trace = Trace(np.zeros(n), np.zeros(n, np.int64), [FILTER] * n, np.zeros(n))
-    for t in range(n):
-        if t > 0:
-            belief = predict(belief, vertex_s, float(ds[t]), settings, spacing)
-        belief = belief * (settings.floor + np.clip(scores[t], 0.0, 1.0))
-        belief /= belief.sum()
-        v = int(np.argmax(belief))
-        trace.vertex[t], trace.s[t], trace.score[t] = v, vertex_s[v], belief[v]
-    return trace
+    if scores.shape != (len(ds), len(bayes.vertex_s)):
+        raise InputError("scores", f"expected {(len(ds), len(bayes.vertex_s))} (frames, vertices), got {scores.shape}")
+    return Trace.of_steps([bayes.step(frame.ds, frame.row()) for frame in drive_frames(ds, MatrixScorer(scores))])
