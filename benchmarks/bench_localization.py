@@ -34,8 +34,8 @@ from topoloc.localization.evaluation import DriveTruth, Judge, score_start, star
 from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.rnn import edge_log_probs, load_model
 from topoloc.localization.roadmap import Odometry, RoadMap
-from topoloc.localizer import make, registry
 from topoloc.odometry.poses import read_poses
+from topoloc.registry import make, registry
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -32,7 +32,7 @@ from topoloc.localization.evaluation import DriveTruth, Judge, score_start, star
 from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.roadmap import Odometry, RoadMap
 from topoloc.localization.simulation import NOISE_LEVELS, simulate
-from topoloc.localizer import make
+from topoloc.registry import make
 
 REPO = Path(__file__).resolve().parents[1]
 KITTI_OSM = REPO.parent / "shared" / "data" / "kitti00" / "map" / "kitti_00.osm"

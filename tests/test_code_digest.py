@@ -48,8 +48,8 @@ for stage in sys.argv[1:]:
     for name in [n for n in sys.modules if n == "topoloc" or n.startswith("topoloc.")]:
         del sys.modules[name]
     importlib.import_module(stage)
-    if "topoloc.localizer" in sys.modules:
-        sys.modules["topoloc.localizer"].registry()
+    if "topoloc.registry" in sys.modules:
+        sys.modules["topoloc.registry"].registry()
     loaded[stage] = sorted(m.__file__ for n, m in list(sys.modules.items())
                            if (n == "topoloc" or n.startswith("topoloc.")) and getattr(m, "__file__", None))
 print(json.dumps(loaded))
@@ -111,7 +111,7 @@ def test_closure_leaves_out_the_glue(stage: str) -> None:
 
 
 def test_localizer_closure_holds_every_registered_localizer_module() -> None:
-    closure = import_closure("topoloc.localizer")
+    closure = import_closure("topoloc.registry")
     assert set((PACKAGE_ROOT / "localizers").glob("*.py")) <= closure
 
 

@@ -59,7 +59,8 @@ def _georeference(args: argparse.Namespace, track: np.ndarray, yaw0: float, crs:
 
 
 def _names(args: argparse.Namespace) -> list[str]:
-    from topoloc.localizer import ROAD_OBSERVATIONS, check_names
+    from topoloc.localizer import ROAD_OBSERVATIONS
+    from topoloc.registry import check_names
 
     names = [n.strip() for n in args.decoder.split(",") if n.strip()]
     if not names:
@@ -78,8 +79,9 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     from topoloc.localization.localize import check_explained, check_on_map, write_geojson
     from topoloc.localization.rnn import load_model
     from topoloc.localization.roadmap import Odometry, RoadMap
-    from topoloc.localizer import ROAD_OBSERVATIONS, make, registry
+    from topoloc.localizer import ROAD_OBSERVATIONS
     from topoloc.odometry.poses import planar_yaw, read_poses
+    from topoloc.registry import make, registry
 
     names = _names(args)
     conf = load_conf(args.config)

@@ -1,4 +1,4 @@
-"""One interface for every localizer, and the registry that names them.
+"""One interface for every localizer.
 
 A localizer answers, one observation at a time, where the vehicle is:
 
@@ -18,23 +18,19 @@ that both agree).
 
 Localizers register themselves by name with :func:`register`; the name is the config key, the CLI
 choice and the table row, :attr:`Localizer.label` the label of tables and figures. Every module of the
-package :mod:`topoloc.localizers` is imported by :func:`registry`, so a new localizer is one module
+package :mod:`topoloc.localizers` is imported by :func:`topoloc.registry.registry`, so a new localizer is one module
 there (plus its schema entry and its test).
 """
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
 from abc import ABC, abstractmethod
-from collections.abc import Collection, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
-
-from topoloc.errors import InputError
 
 #: What a localizer observes, one item per update.
 OBSERVATIONS = ("tokens", "odometry", "images")
@@ -143,33 +139,6 @@ def register(cls: type[Localizer]) -> type[Localizer]:
         raise TypeError(f"two localizers are named {cls.name!r}: {_REGISTRY[cls.name].__name__} and {cls.__name__}")
     _REGISTRY[cls.name] = cls
     return cls
-
-
-def registry(observes: Collection[str] = OBSERVATIONS) -> dict[str, type[Localizer]]:
-    """Every registered localizer that observes one of ``observes`` (default: all) by name, in registration
-    order (imports :mod:`topoloc.localizers`). Road stages pass :data:`ROAD_OBSERVATIONS`."""
-    package = importlib.import_module("topoloc.localizers")
-    for module in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
-        importlib.import_module(f"{package.__name__}.{module.name}")
-    return {name: cls for name, cls in _REGISTRY.items() if cls.observes in observes}
-
-
-def make(name: str, observes: Collection[str] = OBSERVATIONS) -> Localizer:
-    """A new localizer of the registered ``name`` (among those observing ``observes``); KeyError naming the choices otherwise."""
-    known = registry(observes)
-    if name not in known:
-        raise KeyError(f"unknown localizer {name!r}; choose from {sorted(known)}")
-    return known[name]()
-
-
-def check_names(names: Sequence[str], where: str = "localization.localizers",
-                observes: Collection[str] = OBSERVATIONS) -> list[str]:
-    """``names`` if every one is registered (among those observing ``observes``); else InputError naming the first unknown one."""
-    known = registry(observes)
-    for index, name in enumerate(names):
-        if name not in known:
-            raise InputError(f"{where}.{index}", f"unknown localizer {name!r}; choose from {sorted(known)}")
-    return list(names)
 
 
 def run_batch(localizer: Localizer, map: Any, conf: Any, observations: Sequence[Any]) -> Track:

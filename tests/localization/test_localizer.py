@@ -13,7 +13,8 @@ from topoloc.localization.decoders import beam_decode
 from topoloc.localization.hmm import CellHMM, HmmParams
 from topoloc.localization.rnn import edge_log_probs
 from topoloc.localization.roadmap import Odometry, RoadMap
-from topoloc.localizer import Answer, Localizer, check_names, make, register, registry
+from topoloc.localizer import Answer, Localizer, register
+from topoloc.registry import check_names, make, registry
 from topoloc.trajectory.model import TrajectoryRNN
 
 

@@ -13,7 +13,7 @@ from topoloc.localization.metric import MetricModel, MetricSettings
 from topoloc.localization.metric_filter import MetricFilter
 from topoloc.localization.roadmap import Odometry, RoadMap
 from topoloc.localization.simulation import NOISE_LEVELS, NoiseLevel, simulate
-from topoloc.localizer import make
+from topoloc.registry import make
 
 NOISELESS = NoiseLevel("none", (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))
 

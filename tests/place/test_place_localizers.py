@@ -7,15 +7,7 @@ import pytest
 
 from topoloc.config import load
 from topoloc.errors import InputError
-from topoloc.localizer import (
-    PLACE_OBSERVATIONS,
-    ROAD_OBSERVATIONS,
-    Answer,
-    check_names,
-    make,
-    registry,
-    run_batch,
-)
+from topoloc.localizer import PLACE_OBSERVATIONS, ROAD_OBSERVATIONS, Answer, run_batch
 from topoloc.place.localize import (
     MATCH,
     NO_MATCH,
@@ -30,6 +22,7 @@ from topoloc.place.localize import (
 )
 from topoloc.place.markov import FilterSettings, markov_localize
 from topoloc.place.topometric_map import TopometricMap
+from topoloc.registry import check_names, make, registry
 
 PLACE = ("place_loop", "place_filter", "place_odometry")
 

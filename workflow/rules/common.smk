@@ -144,7 +144,8 @@ def decode_inputs(wildcards):
     return inputs
 
 
-from topoloc.localizer import PLACE_OBSERVATIONS, ROAD_OBSERVATIONS, check_names, registry
+from topoloc.localizer import PLACE_OBSERVATIONS, ROAD_OBSERVATIONS
+from topoloc.registry import check_names, registry
 
 LOCALIZERS = registry(ROAD_OBSERVATIONS)
 try:

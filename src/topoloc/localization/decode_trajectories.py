@@ -3,7 +3,7 @@
 Inputs: ``graph``, ``poses`` (the drive's odometry, KITTI format, any frame: ``extract_odometry``),
 ``frames`` (its ``frames.csv``: the true road and position of every frame) and, when a learned localizer
 is configured, ``model`` (the ``train_rnn`` checkpoint). Each localizer of ``localization.localizers``
-(:func:`topoloc.localizer.registry`) runs on the drive cut at every start frame
+(:func:`topoloc.registry.registry`) runs on the drive cut at every start frame
 (:func:`topoloc.localization.evaluation.start_frames`), seeing nothing before it.
 
 Outputs: ``answers`` (CSV, one row per start, localizer and update: the frame, the answer's road,
@@ -28,8 +28,9 @@ from topoloc.localization.evaluation import DriveTruth, start_frames
 from topoloc.localization.localize import write_geojson
 from topoloc.localization.rnn import load_model
 from topoloc.localization.roadmap import Odometry, RoadMap
-from topoloc.localizer import ROAD_OBSERVATIONS, Localizer, check_names, make, registry
+from topoloc.localizer import ROAD_OBSERVATIONS, Localizer
 from topoloc.odometry.poses import read_poses
+from topoloc.registry import check_names, make, registry
 
 log = logging.getLogger(__name__)
 

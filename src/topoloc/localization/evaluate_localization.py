@@ -26,7 +26,7 @@ from topoloc.localization.connectivity import connected_keys, consecutive_connec
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start, summarize
 from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.plot import plot_cdf, plot_fig9
-from topoloc.localizer import registry
+from topoloc.registry import registry
 
 log = logging.getLogger(__name__)
 

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json, write_text
-from topoloc.localizer import PLACE_OBSERVATIONS, check_names, make, run_batch
+from topoloc.localizer import PLACE_OBSERVATIONS, run_batch
 from topoloc.place.images import PlaceSet
 from topoloc.place.localize import (
     MATCH,
@@ -50,6 +50,7 @@ from topoloc.place.localize import (
 from topoloc.place.odometry import noisy_odometry
 from topoloc.place.render_places import check_conditions
 from topoloc.place.topometric_map import TopometricMap
+from topoloc.registry import check_names, make
 
 log = logging.getLogger(__name__)
 
