@@ -3,10 +3,7 @@ import os
 import sys
 from pathlib import Path
 
-from snakemake.exceptions import WorkflowError
-from snakemake.utils import validate
-
-from topoloc.config import validation_message
+from topoloc.config import validate_and_fill
 from topoloc.errors import InputError
 from topoloc.hashing import code_digest
 from topoloc.osm.download_osm import PYROSM_PREFIX, raw_osm_suffix, region_source
@@ -20,11 +17,9 @@ def _fail(message):
 
 
 try:
-    validate(config, "../schemas/config.schema.yaml")
-except WorkflowError as err:
-    # snakemake.utils.validate raises from inside jsonschema's handler: the cause is the context.
-    cause = err.__context__
-    _fail(validation_message(cause) if hasattr(cause, "absolute_path") else str(err).splitlines()[0])
+    validate_and_fill(config)  # the package's schema: fills every default, rejects unknown keys
+except InputError as err:
+    _fail(str(err))
 
 REGION = config["region"]["name"]
 try:
