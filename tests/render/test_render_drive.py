@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tests.conftest import write_osm
+from tests.conftest import make_config, write_osm
 from tests.render.conftest import render_conf, render_outputs
 from topoloc.errors import InputError
 from topoloc.odometry import extract_odometry
