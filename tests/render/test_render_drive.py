@@ -36,7 +36,7 @@ def test_kitti_layout_and_stereo_vo(town, tmp_path):
     image = cv2.imread(str(lefts[0]), cv2.IMREAD_UNCHANGED)
     assert image.shape == (188, 620) and image.dtype == np.uint8
     K, baseline = read_calib(out["calib"])
-    rig = StereoRig.kitti(620, 188)
+    rig = StereoRig.kitti(620, 188, conf["baseline_m"], conf["camera_height_m"])
     assert np.allclose(K, rig.K) and baseline == pytest.approx(0.54)
     gt = read_poses(out["poses"])
     assert len(gt) == n and np.allclose(gt[0], np.eye(4))
