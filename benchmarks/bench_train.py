@@ -19,13 +19,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import yaml
-
-
-def parse_value(text: str) -> object:
-    """``--set`` values are YAML scalars: 20 -> int, 0.01 -> float, gru -> str, null -> None."""
-    return yaml.safe_load(text)
-
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -36,16 +29,13 @@ def main() -> None:
 
     import torch
 
+    from topoloc.config import dotted_overrides, load
     from topoloc.trajectory.dataset import load_sequences
     from topoloc.trajectory.evaluate_rnn import accuracy_by_position, prefix_majority
     from topoloc.trajectory.model import predict
     from topoloc.trajectory.train_rnn import fit
 
-    config = yaml.safe_load(Path(args.configfile).read_text())
-    for item in args.set:
-        key, value = item.split("=", 1)
-        section, name = key.split(".", 1)
-        config[section][name] = parse_value(value)
+    config = load(args.configfile, dotted_overrides(args.set))
     region = args.region or config["region"]["name"]
     data = Path("results") / region / "dataset"
     stats = json.loads((data / "stats.json").read_text())

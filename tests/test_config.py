@@ -41,3 +41,45 @@ def test_bad_config_fails_with_one_line(tmp_path, yaml, expected):
     assert result.returncode != 0
     lines = [line for line in result.stderr.splitlines() if line.startswith("topoloc:")]
     assert len(lines) == 1 and lines[0].startswith(expected), result.stderr[-2000:]
+
+
+def test_load_fills_every_default_from_the_packaged_schema():
+    from topoloc.config import SCHEMA_PATH, load
+
+    assert SCHEMA_PATH.parent.name == "topoloc"  # shipped inside the package
+    config = load(None, {"train": {"lr": 0.5}, "localization": {"hmm": {"cell_m": 4.0}}})
+    assert config["train"]["lr"] == 0.5 and config["train"]["lr_schedule"] == "onecycle"
+    assert config["localization"]["hmm"]["cell_m"] == 4.0 and config["localization"]["hmm"]["floor"] == 0.01
+    assert config["odometry"]["stereo"]["max_features"] == 800 and config["region"] == {
+        "name": "default", "osm_file": None, "place": None, "bbox": None}
+    assert load(REPO / "config" / "config.yaml")["region"]["name"] == "helsinki"
+
+
+@pytest.mark.parametrize(
+    ("overrides", "expected"),
+    [
+        ({"train": {"lr_shedule": "onecycle"}}, "config: unknown key under 'train': Additional properties are not allowed"),
+        ({"train": {"batch_size": "64"}}, "config key 'train.batch_size': '64' is not of type 'integer'"),
+        ({"localization": {"hmm": {"floor": 2}}}, "config key 'localization.hmm.floor': 2 is greater than the maximum of 1"),
+    ],
+)
+def test_load_rejects_a_bad_key_with_one_line_naming_it(overrides, expected):
+    from topoloc.config import load
+    from topoloc.errors import InputError
+
+    with pytest.raises(InputError) as err:
+        load(None, overrides)
+    assert str(err.value).startswith(expected) and "\n" not in str(err.value)
+
+
+def test_load_names_the_file(tmp_path):
+    from topoloc.config import load
+    from topoloc.errors import InputError
+
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("region: {name: x, place: Somewhere}\nmodel:\n  cell: transformer\n")
+    with pytest.raises(InputError, match=rf"^{bad}: config key 'model.cell': 'transformer' is not one of"):
+        load(bad)
+    bad.write_text("- a list\n")
+    with pytest.raises(InputError, match=rf"^{bad}: a config file is a YAML mapping"):
+        load(bad)

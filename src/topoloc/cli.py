@@ -34,11 +34,11 @@ from topoloc.errors import InputError
 log = logging.getLogger("topoloc")
 
 
-def load_conf(path: str | None) -> dict[str, Any]:
-    """The pipeline config of ``path`` (or the schema defaults), validated: the slices a localizer reads."""
+def load_conf(path: str | None, overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The pipeline config of ``path`` (or the schema defaults) with ``overrides``, validated: the slices a localizer reads."""
     from topoloc.config import load
 
-    conf = load(path)
+    conf = load(path, overrides)
     return {k: conf[k] for k in ("localization", "segmentation", "encoding")}
 
 
@@ -84,9 +84,7 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     from topoloc.registry import make, registry
 
     names = _names(args)
-    conf = load_conf(args.config)
-    if args.k is not None:
-        conf["localization"]["decode"]["k"] = args.k
+    conf = load_conf(args.config, {"localization": {"decode": {"k": args.k}}} if args.k is not None else None)
     graph = RoadGraph.load(args.graph)
     poses = read_poses(args.poses)
     if len(poses) < 2:
@@ -131,7 +129,7 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     first = table[table.localizer == names[0]]
     write_geojson(geojson_path, graph, first, names[0], track_xy)
     final = first.iloc[-1]
-    sure = first.confidence.to_numpy() >= args.sure
+    sure = first.confidence.to_numpy() >= (args.sure if args.sure is not None else conf["localization"]["evaluate"]["sure"])
     unsure = np.flatnonzero(~sure)
     since = None if not sure[-1] else float(first.driven_m.iloc[unsure[-1] + 1 if len(unsure) else 0])
     return {"localizer": names[0], "label": known[names[0]].label, "updates": len(first), "edge_now": int(final.edge),
@@ -159,7 +157,8 @@ def build_parser() -> argparse.ArgumentParser:
     loc.add_argument("--k", type=int, default=None, help="hypotheses kept per step by Strategy 1 / 2 (default: localization.decode.k)")
     loc.add_argument("--config", help="pipeline config YAML (its segmentation / encoding / localization keys are used)")
     loc.add_argument("--tracking-uri", help="MLflow store for run ids (default: MLFLOW_TRACKING_URI or results/mlflow.db)")
-    loc.add_argument("--sure", type=float, default=0.9, help="confidence from which the answer counts as sure (summary only)")
+    loc.add_argument("--sure", type=float, default=None,
+                     help="confidence from which the answer counts as sure (summary only; default: localization.evaluate.sure)")
     return parser
 
 

@@ -1,37 +1,70 @@
-"""Config helpers shared by the workflow: one-line validation messages."""
+"""The pipeline config: the schema shipped with the package is the only source of defaults.
+
+:func:`load` reads a config file, fills in every default of ``config.schema.yaml``
+and validates it; :func:`validate_and_fill` does the same to a config that is
+already a dict (the workflow's). Code reads the validated config with ``conf[key]``:
+it never carries defaults of its own.
+"""
 
 from __future__ import annotations
 
 import copy
+import functools
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import jsonschema
+import yaml
 
 from topoloc.errors import InputError
+
+#: The JSON schema of the config (every key documented, with its default).
+SCHEMA_PATH = Path(__file__).with_name("config.schema.yaml")
+
+
+@functools.cache
+def schema() -> dict[str, Any]:
+    """The config schema (read once)."""
+    return yaml.safe_load(SCHEMA_PATH.read_text())
 
 
 def validation_message(error: Any) -> str:
     """One line naming the config key of a jsonschema ``ValidationError`` and what is wrong."""
+    where, message = _where_and_what(error)
+    return f"{where}: {message}"
+
+
+def _where_and_what(error: Any) -> tuple[str, str]:
     path = ".".join(str(part) for part in error.absolute_path)
     message = " ".join(str(error.message).split())
     if error.validator == "additionalProperties":
         where = f"under '{path}'" if path else "at the top level"
-        return f"config: unknown key {where}: {message}"
-    return f"config key '{path or '(top level)'}': {message}"
+        return "config", f"unknown key {where}: {message}"
+    return f"config key '{path or '(top level)'}'", message
 
 
-SCHEMA = Path(__file__).resolve().parents[2] / "workflow" / "schemas" / "config.schema.yaml"
+def validate_and_fill(config: dict[str, Any], source: str | Path | None = None) -> dict[str, Any]:
+    """Fill every schema default into ``config`` (in place) and validate it; returns ``config``.
 
-
-def load(path: str | Path | None = None) -> dict[str, Any]:
-    """The config of ``path`` (a YAML file; None: no keys) with every default of the schema filled in, validated.
-
-    InputError with one line naming the file or key when it is not a valid config.
+    InputError with one line naming the key (and ``source``, the file, when given) when
+    the config is not valid.
     """
-    import jsonschema
-    import yaml
+    validator = _FILLING_VALIDATOR(schema())
+    error = jsonschema.exceptions.best_match(validator.iter_errors(config))
+    if error is not None:
+        where, message = _where_and_what(error)
+        raise InputError(f"{source}: {where}" if source is not None else where, message)
+    return config
 
+
+def load(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The config of ``path`` (a YAML file; None: no keys) updated by ``overrides``, defaults filled, validated.
+
+    ``overrides`` is deep-merged onto the file (nested mappings merge, other values replace).
+    A config without a region gets ``region.name: default``. InputError with one line naming
+    the file or key when it is not a valid config.
+    """
     data: Any = {}
     if path is not None:
         try:
@@ -42,13 +75,35 @@ def load(path: str | Path | None = None) -> dict[str, Any]:
             raise InputError(path, f"not a YAML file ({str(err).splitlines()[0]})") from err
         if not isinstance(data, dict):
             raise InputError(path, "a config file is a YAML mapping")
-    schema = yaml.safe_load(SCHEMA.read_text())
+    data = deep_merge(data, overrides or {})
     data.setdefault("region", {"name": "default"})
-    validator = jsonschema.validators.extend(jsonschema.Draft202012Validator, {"properties": _fill_defaults})(schema)
-    error = jsonschema.exceptions.best_match(validator.iter_errors(data))
-    if error is not None:
-        raise InputError(str(path or "config"), validation_message(error))
-    return data
+    return validate_and_fill(data, path)
+
+
+def dotted_overrides(items: list[str]) -> dict[str, Any]:
+    """Overrides for :func:`load` from ``SECTION.KEY=VALUE`` strings (values are YAML: 20, 0.01, gru, null)."""
+    overrides: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise InputError(item, "an override is SECTION.KEY=VALUE")
+        *parents, last = key.split(".")
+        node = overrides
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[last] = yaml.safe_load(value)
+    return overrides
+
+
+def deep_merge(base: Mapping[str, Any], update: Mapping[str, Any]) -> dict[str, Any]:
+    """A deep copy of ``base`` with ``update`` merged in: nested mappings merge, other values replace."""
+    merged = copy.deepcopy(dict(base))
+    for key, value in update.items():
+        if isinstance(value, Mapping) and isinstance(merged.get(key), Mapping):
+            merged[key] = deep_merge(merged[key], value)
+        else:
+            merged[key] = copy.deepcopy(value)
+    return merged
 
 
 def _fill_defaults(validator: Any, properties: dict[str, Any], instance: Any, schema: dict[str, Any]) -> Any:
@@ -57,3 +112,6 @@ def _fill_defaults(validator: Any, properties: dict[str, Any], instance: Any, sc
             if "default" in sub and key not in instance:
                 instance[key] = copy.deepcopy(sub["default"])
     yield from jsonschema.Draft202012Validator.VALIDATORS["properties"](validator, properties, instance, schema)
+
+
+_FILLING_VALIDATOR = jsonschema.validators.extend(jsonschema.Draft202012Validator, {"properties": _fill_defaults})

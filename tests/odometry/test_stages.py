@@ -7,15 +7,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from tests.conftest import make_config
 from topoloc.errors import InputError
 from topoloc.odometry import extract_odometry, segment_trajectory
 
-SIM = {"drives": 2, "length_m": 1500, "frame_spacing_m": 1.0, "speed_mps": 10.0, "seed": 3,
-       "noise": {"scale_error": 0.02, "distance_noise": 0.01, "heading_drift_deg_per_100m": 0.5, "heading_noise_deg": 0.05}}
-CONF = {"source": "simulated", "drives": {}, "origin": None, "frame_rate_hz": 10.0, "simulated": SIM,
-        "map_matching": {"radius_m": 25.0, "sigma_m": 5.0}}
-SEG = {"segmentation": {"tolerance_m": 5.0, "corner_skip_m": 10.0, "turn_label_offset_m": 5.0},
-       "encoding": {"angle_bins": 20, "heading_lookahead_m": 10.0}}
+CONFIG = make_config(odometry={"source": "simulated", "simulated": {"drives": 2, "length_m": 1500, "seed": 3}})
+CONF = CONFIG["odometry"]
+SEG = {k: CONFIG[k] for k in ("segmentation", "encoding")}
 
 
 def odometry_outputs(tmp_path, drive):

@@ -5,17 +5,20 @@ import cv2
 import numpy as np
 import pytest
 
+from tests.conftest import make_config
 from topoloc.errors import InputError
 from topoloc.odometry.poses import planar_track, read_calib
 from topoloc.odometry.stereo_vo import list_sequence, relative_motion, run_stereo_vo
 from topoloc.odometry.synthetic import BASELINE, CALIB, H, K, W, known_path, stereo_pair, write_sequence
+
+STEREO = make_config()["odometry"]["stereo"]
 
 
 def test_one_step_known_motion():
     poses = known_path(2, step=1.2)
     left0, right0 = stereo_pair(poses[0])
     left1, _ = stereo_pair(poses[1])
-    motion = relative_motion(K, BASELINE, left0, right0, left1)
+    motion = relative_motion(K, BASELINE, left0, right0, left1, STEREO)
     assert motion.ok and motion.inliers > 100
     moved = np.linalg.inv(motion.T)[:3, 3]
     assert np.linalg.norm(moved - (np.linalg.inv(poses[0]) @ poses[1])[:3, 3]) < 0.02 * 1.2
@@ -25,7 +28,7 @@ def test_one_step_known_motion():
 def test_sequence_recovers_path(tmp_path):
     gt = known_path(30)
     root = write_sequence(tmp_path / "seq", gt)
-    est, flagged, facts = run_stereo_vo(root)
+    est, flagged, facts = run_stereo_vo(root, STEREO)
     assert not flagged.any()
     length = np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1).sum()
     end_error = np.linalg.norm(est[-1, :3, 3] - gt[-1, :3, 3])
@@ -42,7 +45,7 @@ def test_textureless_frame_is_flagged(tmp_path):
     blank = np.full((H, W), 128, np.uint8)
     cv2.imwrite(str(root / "image_0" / "000002.png"), blank)
     cv2.imwrite(str(root / "image_1" / "000002.png"), blank)
-    est, flagged, _ = run_stereo_vo(root)
+    est, flagged, _ = run_stereo_vo(root, STEREO)
     assert flagged[2] and flagged[3]  # no features to reach frame 2, none from it to frame 3
     assert not flagged[1]
     assert np.all(np.diff(est[:, 2, 3]) > 0.5)  # the prior keeps the car moving forward
@@ -72,7 +75,7 @@ def test_real_pair_forward_motion(kitti00):
     previous = 0.0
     for j in range(1, 6):
         left = cv2.imread(str(images / f"image_0_00000{j}.png"), cv2.IMREAD_GRAYSCALE)
-        motion = relative_motion(k, baseline, left0, right0, left)
+        motion = relative_motion(k, baseline, left0, right0, left, STEREO)
         assert motion.ok
         moved = np.linalg.inv(motion.T)[:3, 3]
         # Forward (+z) and growing; little sideways or vertical motion. No metric scale (see the data README).
@@ -85,9 +88,9 @@ def test_extract_odometry_kitti_stereo(tmp_path, grid_graph):
     from topoloc.odometry import extract_odometry
 
     root = write_sequence(tmp_path / "seq", known_path(6))
-    conf = {"source": "kitti_stereo", "drive": "vo", "drives": {"vo": {"sequence": str(root)}},
-            "origin": {"lat": 48.9805, "lon": 8.39, "heading_deg": 0.0}, "frame_rate_hz": 10.0, "stereo": {},
-            "map_matching": {"radius_m": 25.0, "sigma_m": 5.0}}
+    odometry = make_config(odometry={"source": "kitti_stereo", "drives": {"vo": {"sequence": str(root)}},
+                                     "origin": {"lat": 48.9805, "lon": 8.39, "heading_deg": 0.0}})["odometry"]
+    conf = {**odometry, "drive": "vo"}
     names = {"poses": "poses.txt", "frames": "frames.csv", "stats": "odometry.json", "figure": "track.png",
              "evaluation": "evaluation.png"}
     out = {k: str(tmp_path / "out" / v) for k, v in names.items()}

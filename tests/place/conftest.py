@@ -5,16 +5,15 @@ from __future__ import annotations
 import copy
 from pathlib import Path
 
-import yaml
-
 from tests.render.conftest import render_conf, town  # noqa: F401 (the town fixture, re-exported)
+from topoloc.config import load
 
 REPO = Path(__file__).resolve().parents[2]
-DEFAULTS = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["place"]
+DEFAULTS = load(REPO / "config" / "config.yaml")["place"]
 
 
 def place_conf(**sections) -> dict:
-    """The default ``place`` slice (config/config.yaml) with small images and budgets, updated by ``sections``."""
+    """The default ``place`` slice (config/config.yaml, schema defaults filled) with small images and budgets, updated by ``sections``."""
     conf = copy.deepcopy(DEFAULTS)
     conf["image"].update(width=64, height=48)
     conf["train"].update(routes=3, val_routes=1, route_length_m=120.0, min_distance_m=20.0, min_frames=20,

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.conftest import write_osm
+from tests.conftest import make_config, write_osm
 from topoloc.graph.build_graph import build_road_graph
 
 LON0, LAT0 = 8.39, 48.98
@@ -78,13 +78,8 @@ def town(tmp_path_factory) -> dict[str, Path]:
 
 
 def render_conf(**overrides) -> dict:
-    """A ``render`` config slice with the schema's defaults, small sheets, and ``overrides``."""
-    conf = {"routes": 1, "conditions": ["clear_noon"], "length_m": 160.0, "frame_spacing_m": 1.0, "max_turn_deg": 3.0,
-            "speed_mps": 10.0, "smoothing_m": 4.0, "lane_offset_m": 1.5, "seed": 0, "width": 620, "height": 188,
-            "baseline_m": 0.54, "camera_height_m": 1.65, "view_distance_m": 100.0,
-            "buildings": {"default_height_m": [9.0, 24.0], "level_height_m": 3.2, "clearance_m": 2.5,
-                          "procedural": True, "procedural_gap_m": 15.0},
-            "sheet": {"conditions": ["clear_noon", "night"], "frames": 2}}
+    """The ``render`` config slice (schema defaults) with a short route, small sheets, and ``overrides``."""
+    conf = make_config(render={"length_m": 160.0, "sheet": {"conditions": ["clear_noon", "night"], "frames": 2}})["render"]
     conf.update(overrides)
     return conf
 

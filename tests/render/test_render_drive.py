@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tests.conftest import write_osm
+from tests.conftest import make_config, write_osm
 from tests.render.conftest import render_conf, render_outputs
 from topoloc.errors import InputError
 from topoloc.odometry import extract_odometry
@@ -36,7 +36,7 @@ def test_kitti_layout_and_stereo_vo(town, tmp_path):
     image = cv2.imread(str(lefts[0]), cv2.IMREAD_UNCHANGED)
     assert image.shape == (188, 620) and image.dtype == np.uint8
     K, baseline = read_calib(out["calib"])
-    rig = StereoRig.kitti(620, 188)
+    rig = StereoRig.kitti(620, 188, conf["baseline_m"], conf["camera_height_m"])
     assert np.allclose(K, rig.K) and baseline == pytest.approx(0.54)
     gt = read_poses(out["poses"])
     assert len(gt) == n and np.allclose(gt[0], np.eye(4))
@@ -55,8 +55,7 @@ def test_kitti_layout_and_stereo_vo(town, tmp_path):
     odo_out = {k: str(tmp_path / "odometry" / v) for k, v in odo.items()}
     inputs = {"graph": str(town["graph"]), "calib": out["calib"], "ground_truth": out["poses"], "times": out["times"],
               "gps": out["gps"], "truth": out["route"]}
-    odo_conf = {"source": "rendered", "drive": "ren00_clear_noon", "drives": {}, "origin": None, "frame_rate_hz": 10.0,
-                "stereo": {}, "map_matching": {"radius_m": 25.0, "sigma_m": 5.0}}
+    odo_conf = {**make_config(odometry={"source": "rendered"})["odometry"], "drive": "ren00_clear_noon"}
     metrics = extract_odometry.run(odo_conf, inputs, odo_out)
     print(f"rendered 160 m drive: VO t_err {metrics['t_err_pct']:.2f} %, r_err {metrics['r_err_deg_per_100m']:.3f} deg/100 m")
     assert metrics["flagged_frames"] == 0

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import shapely
 
+from tests.conftest import make_config
 from tests.render.conftest import EMPTY_BLOCK, STREETS_M
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
@@ -17,7 +18,16 @@ from topoloc.render.route import render_route
 from topoloc.render.scene import Building, Scene, parse_height, read_buildings, scene_for_path
 from topoloc.render.textures import Road
 
-RIG = StereoRig.kitti(620, 188)
+RENDER = make_config()["render"]
+
+
+def kitti_rig(width: int, height: int) -> StereoRig:
+    """The KITTI rig scaled to ``width`` x ``height`` with the default render baseline and camera height."""
+    return StereoRig.kitti(width, height, RENDER["baseline_m"], RENDER["camera_height_m"])
+
+
+RIG = kitti_rig(620, 188)
+VIEW_M = RENDER["view_distance_m"]
 NORTH = np.pi / 2
 
 
@@ -44,7 +54,7 @@ def disparities(left: np.ndarray, right: np.ndarray, rows: slice) -> tuple[np.nd
 
 @pytest.mark.parametrize("depth", [6.0, 12.0, 25.0])
 def test_wall_disparity_is_f_b_over_z(depth):
-    renderer = Renderer(wall_scene(depth), RIG, get_condition("overcast"))
+    renderer = Renderer(wall_scene(depth), RIG, get_condition("overcast"), 0, VIEW_M)
     left, right = (gray(im) for im in renderer.stereo_pair(np.zeros(2), NORTH))
     # The wall spans the rows between its top (15 m) and its foot; keep clear of both edges.
     top = RIG.cy - (15.0 - RIG.camera_height) * RIG.f / depth
@@ -68,7 +78,7 @@ def row_disparity(left_row: np.ndarray, right_row: np.ndarray, d_max: int) -> fl
 def test_ground_disparity_follows_rows():
     # Without sensor noise: each ground row is one depth z = h f / (v - cy), so it shifts by f b / z as a whole.
     quiet = dataclasses.replace(get_condition("clear_noon"), noise_std=0.0)
-    renderer = Renderer(wall_scene(80.0), RIG, quiet)
+    renderer = Renderer(wall_scene(80.0), RIG, quiet, 0, VIEW_M)
     left, right = (gray(im) for im in renderer.stereo_pair(np.zeros(2), NORTH))
     rows = np.arange(int(RIG.cy) + 20, RIG.height - 2, 8)
     measured = np.array([row_disparity(left[v], right[v], 60) for v in rows])
@@ -77,10 +87,10 @@ def test_ground_disparity_follows_rows():
 
 
 def test_same_seed_same_bytes_other_seed_other_image():
-    a = Renderer(wall_scene(12.0, seed=3), RIG, get_condition("rain"), seed=1).stereo_pair(np.zeros(2), NORTH, 5)
-    b = Renderer(wall_scene(12.0, seed=3), RIG, get_condition("rain"), seed=1).stereo_pair(np.zeros(2), NORTH, 5)
-    c = Renderer(wall_scene(12.0, seed=4), RIG, get_condition("rain"), seed=1).stereo_pair(np.zeros(2), NORTH, 5)
-    d = Renderer(wall_scene(12.0, seed=3), RIG, get_condition("rain"), seed=1).stereo_pair(np.zeros(2), NORTH, 6)
+    a = Renderer(wall_scene(12.0, seed=3), RIG, get_condition("rain"), 1, VIEW_M).stereo_pair(np.zeros(2), NORTH, 5)
+    b = Renderer(wall_scene(12.0, seed=3), RIG, get_condition("rain"), 1, VIEW_M).stereo_pair(np.zeros(2), NORTH, 5)
+    c = Renderer(wall_scene(12.0, seed=4), RIG, get_condition("rain"), 1, VIEW_M).stereo_pair(np.zeros(2), NORTH, 5)
+    d = Renderer(wall_scene(12.0, seed=3), RIG, get_condition("rain"), 1, VIEW_M).stereo_pair(np.zeros(2), NORTH, 6)
     assert all(x.tobytes() == y.tobytes() for x, y in zip(a, b))
     assert a[0].tobytes() != c[0].tobytes()  # another facade texture
     assert a[0].tobytes() != d[0].tobytes()  # another frame: other rain and sensor noise
@@ -89,7 +99,7 @@ def test_same_seed_same_bytes_other_seed_other_image():
 def test_conditions_look_different():
     assert len(CONDITIONS) >= 5
     scene = wall_scene(15.0)
-    images = {name: Renderer(scene, RIG, cond).render(np.zeros(2), NORTH).astype(float) for name, cond in CONDITIONS.items()}
+    images = {name: Renderer(scene, RIG, cond, 0, VIEW_M).render(np.zeros(2), NORTH).astype(float) for name, cond in CONDITIONS.items()}
     names = list(images)
     for i, a in enumerate(names):
         for b in names[i + 1:]:
@@ -105,15 +115,15 @@ def test_bad_inputs_name_the_key():
     with pytest.raises(InputError, match=r"^render.conditions: unknown condition 'snow'"):
         get_condition("snow")
     with pytest.raises(InputError, match=r"^render.width: image size 32x188 is too small"):
-        StereoRig.kitti(32, 188)
+        kitti_rig(32, 188)
     with pytest.raises(InputError, match=r"^render.height: "):
-        StereoRig.kitti(620, 20)
+        kitti_rig(620, 20)
 
 
 def test_rig_scales_kitti_intrinsics():
-    full = StereoRig.kitti(1241, 376)
+    full = kitti_rig(1241, 376)
     assert full.f == pytest.approx(718.856) and full.cx == pytest.approx(607.1928) and full.cy == pytest.approx(185.2157)
-    half = StereoRig.kitti(620, 188)
+    half = kitti_rig(620, 188)
     assert half.f == pytest.approx(718.856 * 620 / 1241)
     assert half.disparity(10.0) == pytest.approx(half.f * 0.54 / 10.0)
 
@@ -142,8 +152,8 @@ def test_parse_height():
 
 def test_buildings_and_procedural_facades(town):
     graph = RoadGraph.load(town["graph"])
-    conf = {"default_height_m": [9.0, 24.0], "level_height_m": 3.2, "clearance_m": 2.5, "procedural": True,
-            "procedural_gap_m": 15.0, "view_distance_m": 100.0}
+    render = make_config()["render"]
+    conf = {**render["buildings"], "view_distance_m": render["view_distance_m"]}
     real = read_buildings(town["osm"], graph.crs, conf, seed=0)
     assert len(real) == len({b.key for b in real}) > 30  # one per footprint (way), no duplicates
     assert all(b.source == "osm" for b in real)

@@ -6,23 +6,32 @@ import numpy as np
 import pytest
 import torch
 
+from tests.conftest import make_config
 from topoloc.trajectory.dataset import load_sequences
 from topoloc.trajectory.evaluate_rnn import accuracy_by_position, prefix_majority
 from topoloc.trajectory.generate_dataset import generate
 from topoloc.trajectory.model import IGNORE, LengthBucketBatches, TrajectoryRNN, pad_batch, predict
-from topoloc.trajectory.train_rnn import fit
+from topoloc.trajectory.train_rnn import build_model, fit
 from trajectory_helpers import random_graph
 
 def confs(**train):
-    return {
-        "encoding": {"angle_bins": 20, "heading_lookahead_m": 10.0},
-        "dataset": {"path_nodes": 4, "respect_oneway": False, "max_paths_per_source": None, "max_paths_total": None,
-                    "val_fraction": 0.2, "seed": 0, "shard_rows": 64, "augment": {"copies": 0}},
-        "model": {"cell": "gru", "hidden_size": 64, "embedding_dim": 16},
-        "train": {"optimizer": "adam", "lr": 0.01, "batch_size": 16, "max_epochs": 1, "max_time_min": None,
-                  "early_stopping_patience": None, "gradient_clip": 1.0, "seed": 0, "accelerator": "cpu",
-                  "log_every_n_steps": 5, "state_loss_weight": 0.5} | train,
-    }
+    """The config of a small, fast training (schema defaults otherwise), ``train`` keys on top."""
+    return make_config(
+        dataset={"path_nodes": 4, "respect_oneway": False, "val_fraction": 0.2, "shard_rows": 64},
+        model={"cell": "gru", "hidden_size": 64, "embedding_dim": 16},
+        train={"batch_size": 16, "max_epochs": 1, "max_time_min": None, "early_stopping_patience": None,
+               "gradient_clip": 1.0, "accelerator": "cpu", "log_every_n_steps": 5, **train},
+    )
+
+def test_schema_defaults_reach_the_model():
+    """A config from load() with no override builds the pipeline's model: no code default stands in between."""
+    config = make_config()
+    assert config["train"]["lr_schedule"] == "onecycle" and config["train"]["state_loss_weight"] == 0.5
+    model = build_model(config, num_edges=7)
+    assert model.hparams.lr_schedule == "onecycle"
+    assert model.hparams.state_loss_weight == 0.5 and hasattr(model, "state_head")
+    assert model.hparams.warmup_fraction == config["train"]["warmup_fraction"]
+    assert (model.hparams.cell, model.hparams.hidden_size) == ("lstm", config["model"]["hidden_size"])
 
 @pytest.fixture
 def small_dataset(tmp_path):

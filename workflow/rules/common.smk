@@ -3,10 +3,7 @@ import os
 import sys
 from pathlib import Path
 
-from snakemake.exceptions import WorkflowError
-from snakemake.utils import validate
-
-from topoloc.config import validation_message
+from topoloc.config import validate_and_fill
 from topoloc.errors import InputError
 from topoloc.code_digest import code_digest_of
 from topoloc.osm.download_osm import PYROSM_PREFIX, raw_osm_suffix, region_source
@@ -20,11 +17,9 @@ def _fail(message):
 
 
 try:
-    validate(config, "../schemas/config.schema.yaml")
-except WorkflowError as err:
-    # snakemake.utils.validate raises from inside jsonschema's handler: the cause is the context.
-    cause = err.__context__
-    _fail(validation_message(cause) if hasattr(cause, "absolute_path") else str(err).splitlines()[0])
+    validate_and_fill(config)  # the package's schema: fills every default, rejects unknown keys
+except InputError as err:
+    _fail(str(err))
 
 REGION = config["region"]["name"]
 try:
@@ -50,7 +45,7 @@ def code(module):
 
 def local_osm_file(wildcards):
     """The region's local OSM file as an input (changes rerun download_osm); none for pyrosm/place/bbox."""
-    osm_file = config["region"].get("osm_file")
+    osm_file = config["region"]["osm_file"]
     if REGION_SOURCE == "osm_file" and not str(osm_file).startswith(PYROSM_PREFIX):
         return {"osm_file": osm_file}
     return {}
@@ -75,7 +70,7 @@ def all_outputs():
 from topoloc.odometry.extract_odometry import drive_names
 
 try:
-    DRIVES = drive_names(config["odometry"], config.get("render"))
+    DRIVES = drive_names(config["odometry"], config["render"])
 except InputError as err:
     _fail(str(err))
 if not DRIVES:
@@ -88,7 +83,7 @@ wildcard_constraints:
 def odometry_inputs(wildcards):
     """The road graph plus the drive's files (poses, ground truth, times, GPS, stereo sequence; rendered: render_drive's outputs)."""
     inputs = {"graph": rules.build_graph.output.graph.format(region=wildcards.region)}
-    drive = (config["odometry"].get("drives") or {}).get(wildcards.drive) or {}
+    drive = config["odometry"]["drives"].get(wildcards.drive) or {}
     for key in ("poses", "ground_truth", "times", "gps"):
         if drive.get(key):
             inputs[key] = drive[key]

@@ -118,7 +118,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     ``exclude_private_roads`` and ``figure`` options.
     """
     graph, facts = build_road_graph(
-        inputs["osm"], conf["highway_classes"], conf["virtual_node_spacing_m"], conf.get("crs"), conf["exclude_private_roads"]
+        inputs["osm"], conf["highway_classes"], conf["virtual_node_spacing_m"], conf["crs"], conf["exclude_private_roads"]
     )
     stats = graph_stats(graph, facts)
     log.info("road graph: %d nodes, %d edges, %.1f km, %d virtual nodes (%s)",

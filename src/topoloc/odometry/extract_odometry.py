@@ -55,13 +55,13 @@ def drive_names(conf: dict[str, Any], render: dict[str, Any] | None = None) -> l
         if render is None:
             raise InputError("render", "odometry.source rendered needs the render config section")
         return rendered_drive_names(render)
-    return list(conf.get("drives") or {})
+    return list(conf["drives"])
 
 
 def _georeference(track: np.ndarray, yaw0: float, gps_xy: np.ndarray | None, conf: dict[str, Any], crs: str) -> Georeference:
     if gps_xy is not None:
         return fit_rigid(track, gps_xy)
-    origin = conf.get("origin")
+    origin = conf["origin"]
     if not origin:
         raise InputError("odometry.origin", "a drive without a gps file needs odometry.origin {lat, lon, heading_deg}")
     xy0 = to_map(crs, origin["lat"], origin["lon"])

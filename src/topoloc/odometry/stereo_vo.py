@@ -37,10 +37,6 @@ from topoloc.odometry.poses import read_calib
 
 log = logging.getLogger(__name__)
 
-DEFAULTS: dict[str, Any] = {"max_features": 800, "min_distance_px": 8, "quality": 0.005, "max_row_error_px": 1.5,
-                            "min_depth_m": 1.0, "max_depth_m": 80.0, "ransac_reprojection_px": 1.0,
-                            "min_inliers": 25, "fb_error_px": 0.0}
-
 _LK = {"winSize": (15, 15), "maxLevel": 3,
        "criteria": (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)}
 
@@ -110,9 +106,8 @@ def pnp_motion(K: NDArray, xyz: NDArray, uv: NDArray, conf: dict[str, Any]) -> t
 
 
 def relative_motion(K: NDArray, baseline: float, left0: NDArray, right0: NDArray, left1: NDArray,
-                    conf: dict[str, Any] | None = None) -> Motion:
-    """Motion from stereo frame 0 to left image 1: ``Motion.T`` maps frame-0 points into camera 1."""
-    conf = {**DEFAULTS, **(conf or {})}
+                    conf: dict[str, Any]) -> Motion:
+    """Motion from stereo frame 0 to left image 1 (``conf``: ``odometry.stereo``): ``Motion.T`` maps frame-0 points into camera 1."""
     left0, right0, left1 = _gray(left0), _gray(right0), _gray(left1)
     pts, xyz = stereo_points(K, baseline, left0, right0, conf)
     uv, ok = track(left0, left1, pts, conf["fb_error_px"])
@@ -144,9 +139,11 @@ def _read(path: Path) -> NDArray[np.uint8]:
     return image
 
 
-def run_stereo_vo(sequence: str | Path, conf: dict[str, Any] | None = None) -> tuple[NDArray, NDArray[np.bool_], dict[str, Any]]:
-    """Poses (n, 4, 4), per-frame flags (motion prior used) and run facts of the VO on a KITTI sequence folder."""
-    conf = {**DEFAULTS, **(conf or {})}
+def run_stereo_vo(sequence: str | Path, conf: dict[str, Any]) -> tuple[NDArray, NDArray[np.bool_], dict[str, Any]]:
+    """Poses (n, 4, 4), per-frame flags (motion prior used) and run facts of the VO on a KITTI sequence folder.
+
+    ``conf`` is the ``odometry.stereo`` config slice.
+    """
     lefts, rights, calib = list_sequence(sequence)
     K, baseline = read_calib(calib)
     poses = np.tile(np.eye(4), (len(lefts), 1, 1))

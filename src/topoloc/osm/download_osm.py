@@ -35,7 +35,7 @@ _OFFLINE_HINT = (
 
 def region_source(region: dict[str, Any]) -> str:
     """Which of ``osm_file``, ``place``, ``bbox`` defines ``region``; InputError unless exactly one."""
-    given = [key for key in ("osm_file", "place", "bbox") if region.get(key) not in (None, "")]
+    given = [key for key in ("osm_file", "place", "bbox") if region[key] not in (None, "")]
     if len(given) != 1:
         raise InputError("region", f"set exactly one of region.osm_file, region.place, region.bbox (got {given or 'none'})")
     if given[0] == "bbox":

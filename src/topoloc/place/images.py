@@ -37,7 +37,7 @@ from topoloc.io import atomic_path
 from topoloc.render.conditions import get_condition
 from topoloc.render.render_drive import drive_path, drive_scene
 from topoloc.render.renderer import Renderer
-from topoloc.render.rig import StereoRig
+from topoloc.render.rig import KITTI_BASELINE_M, StereoRig
 from topoloc.render.route import CameraPath, render_route
 
 
@@ -97,8 +97,8 @@ class PlaceSet:
 def make_rig(image: dict[str, Any], render_conf: dict[str, Any]) -> StereoRig:
     """The camera of the place images: KITTI intrinsics scaled to ``place.image`` width x height, mounted at
     ``render.camera_height_m`` (the left camera only: the baseline plays no part)."""
-    return StereoRig.kitti(int(image["width"]), int(image["height"]), camera_height=float(render_conf["camera_height_m"]),
-                           where="place.image")
+    return StereoRig.kitti(int(image["width"]), int(image["height"]), KITTI_BASELINE_M,
+                           float(render_conf["camera_height_m"]), where="place.image")
 
 
 def render_images(renderer: Renderer, xy: NDArray[np.float64], yaw: NDArray[np.float64], color: bool,

@@ -129,7 +129,7 @@ def build_model(conf: dict[str, Any], in_channels: int, names: list[str]) -> Sia
                        lr=float(train["lr"]), lr_decay=float(train["lr_decay"]), weight_decay=float(train["weight_decay"]),
                        augment=bool(train["augment"]), seed=int(train["seed"]))
     model.condition_names = list(names)
-    if net.get("weights"):
+    if net["weights"]:
         path = Path(net["weights"])
         if not path.is_file():
             raise InputError("place.network.weights", f"{path}: weights file not found")
@@ -208,7 +208,7 @@ def fit(conf: dict[str, Any], places: PlaceSet, model_path: str, logger: Any = N
                for pairs in (seen, every)]
     model = build_model(conf, places.images.shape[-1], places.conditions)
     history = History(every=max(1, int(train["log_every_n_steps"])))
-    max_time = train.get("max_time_min")
+    max_time = train["max_time_min"]
     with best_checkpoint(model_path) as checkpoint:
         trainer = L.Trainer(
             accelerator=train["accelerator"], devices=1, max_epochs=int(train["max_epochs"]),
@@ -270,7 +270,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     write_json(outputs["metrics"], metrics)
     training_figure(history, metrics, outputs["figure"])
     log.info("trained: %s", metrics)
-    if active and conf["train"].get("log_model", True):
+    if active and conf["train"]["log_model"]:
         example = np.stack([places.images[0, :2], places.images[-1, :2]], axis=1)
         log_mlflow_model(model, example)
     return metrics

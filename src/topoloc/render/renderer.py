@@ -33,8 +33,7 @@ _GROUND_MEAN = np.array([105.0, 106.0, 108.0], np.float32) / 255.0
 class Renderer:
     """Renders a scene for a rig and a condition; build one per condition (the set-up is cheap)."""
 
-    def __init__(self, scene: Scene, rig: StereoRig, condition: Condition, seed: int = 0,
-                 view_distance_m: float = 100.0) -> None:
+    def __init__(self, scene: Scene, rig: StereoRig, condition: Condition, seed: int, view_distance_m: float) -> None:
         self.scene, self.rig, self.cond, self.seed, self.view = scene, rig, condition, int(seed), float(view_distance_m)
         c = condition
         self.k = rig.column_slopes().astype(np.float32)

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from topoloc.errors import InputError
 
 KITTI_SIZE = (1241, 376)
+KITTI_BASELINE_M = 0.54
 KITTI_F, KITTI_CX, KITTI_CY = 718.856, 607.1928, 185.2157
 MIN_SIZE = (64, 48)
 
@@ -31,12 +32,11 @@ class StereoRig:
     f: float
     cx: float
     cy: float
-    baseline: float = 0.54
-    camera_height: float = 1.65
+    baseline: float
+    camera_height: float
 
     @classmethod
-    def kitti(cls, width: int = 620, height: int = 188, baseline: float = 0.54, camera_height: float = 1.65,
-              where: str = "render") -> StereoRig:
+    def kitti(cls, width: int, height: int, baseline: float, camera_height: float, where: str = "render") -> StereoRig:
         """The KITTI 00 intrinsics scaled to ``width`` x ``height``; InputError naming ``where.*`` on bad values."""
         if int(width) < MIN_SIZE[0] or int(height) < MIN_SIZE[1]:
             raise InputError(f"{where}.width" if int(width) < MIN_SIZE[0] else f"{where}.height",

@@ -44,9 +44,6 @@ PROCEDURAL_KEY = 10**12
 ATLAS_COLUMNS = 64
 CELL_M = 64.0
 _STRIDE = TILE_W + 2  # atlas columns per facade tile: the tile and a wrap-around column on each side
-#: Defaults of the ``render.buildings`` settings and the view distance (as in the config schema).
-SCENE_DEFAULTS: dict[str, Any] = {"default_height_m": [9.0, 24.0], "level_height_m": 3.2, "clearance_m": 2.5,
-                                  "procedural": True, "procedural_gap_m": 15.0, "view_distance_m": 100.0}
 _NUMBER = re.compile(r"^\s*([0-9]+(?:[.,][0-9]+)?)\s*(m|meters|metres)?\s*$")
 
 
@@ -243,13 +240,11 @@ class Scene:
 
 
 def scene_for_path(osm_path: str | Path | None, graph: RoadGraph, path_xy: NDArray[np.float64],
-                   conf: dict[str, Any] | None = None, seed: int = 0) -> Scene:
+                   conf: dict[str, Any], seed: int) -> Scene:
     """The scene around a driven path: OSM buildings (if ``osm_path``), procedural facades, the graph's roads.
 
-    ``conf`` holds the ``render.buildings`` settings and ``view_distance_m``; missing keys take
-    :data:`SCENE_DEFAULTS` (the config schema's defaults).
+    ``conf`` holds the ``render.buildings`` settings and ``render.view_distance_m``.
     """
-    conf = {**SCENE_DEFAULTS, **(conf or {})}
     path = shapely.LineString(path_xy) if len(path_xy) > 1 else shapely.Point(path_xy[0])
     view = float(conf["view_distance_m"])
     real = read_buildings(osm_path, graph.crs, conf, seed) if osm_path is not None else []

@@ -155,10 +155,10 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     """Evaluate ``inputs['model']`` on ``train``/``val``; write ``table``, ``csv``, ``metrics``, ``loss_figure``, ``accuracy_figure``."""
     region = conf.get("region", "")
     model = TrajectoryRNN.load_from_checkpoint(inputs["model"], map_location="cpu")
-    limit = conf["evaluate"].get("max_train_trajectories")
+    limit = conf["evaluate"]["max_train_trajectories"]
     data = {"train": load_sequences(inputs["train"], limit), "held-out": load_sequences(inputs["val"])}
     tables = {split: accuracy_by_position(predict(model, tokens), labels) for split, (tokens, labels) in data.items()}
-    if conf["evaluate"].get("ceiling", True):
+    if conf["evaluate"]["ceiling"]:
         reference = load_sequences(inputs["train"]) if limit is not None else data["train"]
         ref_tokens, ref_labels = reference[0] + data["held-out"][0], reference[1] + data["held-out"][1]
         for split, (tokens, labels) in data.items():

@@ -21,32 +21,18 @@ from topoloc.trajectory.paths import sample_paths
 log = logging.getLogger(__name__)
 
 
-def check_encoding(encoding: dict[str, Any]) -> int:
-    """The number of angle bins, checked (``encoding.angle_bins`` >= 4)."""
-    bins = encoding.get("angle_bins", 20)
-    if int(bins) != bins or bins < 4:
-        raise InputError("encoding.angle_bins", f"must be an integer >= 4, got {bins}")
-    return int(bins)
-
-
 def generate(graph: RoadGraph, conf: dict[str, Any], train_path: str, val_path: str) -> dict[str, Any]:
     """Write the dataset of ``graph`` to the two Parquet files; return its statistics."""
     data = conf["dataset"]
-    bins = check_encoding(conf["encoding"])
+    bins = int(conf["encoding"]["angle_bins"])
     path_nodes = int(data["path_nodes"])
-    if path_nodes < 2:
-        raise InputError("dataset.path_nodes", f"must be at least 2, got {path_nodes}")
     if path_nodes > len(graph.nodes):
         raise InputError("dataset.path_nodes", f"{path_nodes} nodes per path, but the graph has only {len(graph.nodes)} nodes")
     val_fraction = float(data["val_fraction"])
-    if not 0.0 <= val_fraction < 1.0:
-        raise InputError("dataset.val_fraction", f"must be in [0, 1), got {val_fraction}")
-    aug = data.get("augment", {})
-    noise = Noise(int(aug.get("copies", 0)), float(aug.get("angle_std_deg", 0.0)), float(aug.get("spacing_rel_std", 0.0)))
+    aug = data["augment"]
+    noise = Noise(int(aug["copies"]), float(aug["angle_std_deg"]), float(aug["spacing_rel_std"]))
     seed = int(data["seed"])
-    mode = data.get("encoding", "nodes")
-    if mode not in ("nodes", "douglas_peucker"):
-        raise InputError("dataset.encoding", f"must be nodes or douglas_peucker, got {mode!r}")
+    mode = data["encoding"]
     if mode == "douglas_peucker" and "segmentation" not in conf:
         raise InputError("dataset.encoding", "douglas_peucker needs the segmentation config")
     encoder = PathEncoder(graph, bins, float(conf["encoding"]["heading_lookahead_m"]),
@@ -65,8 +51,8 @@ def generate(graph: RoadGraph, conf: dict[str, Any], train_path: str, val_path: 
             graph,
             path_nodes,
             respect_oneway=bool(data["respect_oneway"]),
-            max_per_source=data.get("max_paths_per_source"),
-            max_total=data.get("max_paths_total"),
+            max_per_source=data["max_paths_per_source"],
+            max_total=data["max_paths_total"],
             seed=seed,
         )
         for path_id, path in enumerate(paths):

@@ -21,7 +21,6 @@ import torch
 from topoloc.training import History, best_checkpoint, keep_best
 from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json
-from topoloc.trajectory.generate_dataset import check_encoding
 from topoloc.trajectory.model import TrajectoryData, TrajectoryRNN
 
 log = logging.getLogger(__name__)
@@ -33,19 +32,19 @@ def build_model(conf: dict[str, Any], num_edges: int) -> TrajectoryRNN:
     if train["optimizer"] not in ("adam", "sgd"):
         raise InputError("train.optimizer", f"must be adam or sgd, got {train['optimizer']!r}")
     return TrajectoryRNN(
-        bins=check_encoding(conf["encoding"]),
+        bins=int(conf["encoding"]["angle_bins"]),
         num_edges=num_edges,
         cell=model["cell"],
         hidden_size=int(model["hidden_size"]),
         embedding_dim=int(model["embedding_dim"]),
         optimizer=train["optimizer"],
         lr=float(train["lr"]),
-        weight_decay=float(train.get("weight_decay", 0.0)),
-        lr_schedule=train.get("lr_schedule", "constant"),
-        plateau_factor=float(train.get("lr_plateau_factor", 0.3)),
-        plateau_patience=int(train.get("lr_plateau_patience", 1)),
-        warmup_fraction=float(train.get("warmup_fraction", 0.15)),
-        state_loss_weight=float(train.get("state_loss_weight", 0.0)),
+        weight_decay=float(train["weight_decay"]),
+        lr_schedule=train["lr_schedule"],
+        plateau_factor=float(train["lr_plateau_factor"]),
+        plateau_patience=int(train["lr_plateau_patience"]),
+        warmup_fraction=float(train["warmup_fraction"]),
+        state_loss_weight=float(train["state_loss_weight"]),
     )
 
 
@@ -54,10 +53,10 @@ def fit(conf: dict[str, Any], train_path: str, val_path: str, num_edges: int, mo
     """Train; write the best checkpoint to ``model_path``; return the model, the history and metrics."""
     train = conf["train"]
     L.seed_everything(int(train["seed"]), workers=True, verbose=False)
-    bins = check_encoding(conf["encoding"])
+    bins = int(conf["encoding"]["angle_bins"])
     data = TrajectoryData(train_path, val_path, bins, int(train["batch_size"]), int(train["seed"]),
-                          bucket_by_length=bool(train.get("bucket_by_length", True)),
-                          state_targets=float(train.get("state_loss_weight", 0.0)) > 0)
+                          bucket_by_length=bool(train["bucket_by_length"]),
+                          state_targets=float(train["state_loss_weight"]) > 0)
     data.setup()
     if len(data.train) == 0:
         raise InputError(train_path, "empty training set (dataset stage produced no training paths)")
@@ -66,10 +65,10 @@ def fit(conf: dict[str, Any], train_path: str, val_path: str, num_edges: int, mo
     model = build_model(conf, num_edges)
     history = History(every=max(1, int(train["log_every_n_steps"])))
     early_stopping = []
-    if train.get("early_stopping_patience") is not None:
+    if train["early_stopping_patience"] is not None:
         early_stopping.append(L.pytorch.callbacks.EarlyStopping(monitor="val_loss", mode="min",
                                                                 patience=int(train["early_stopping_patience"])))
-    max_time = train.get("max_time_min")
+    max_time = train["max_time_min"]
     with best_checkpoint(model_path) as checkpoint:
         trainer = L.Trainer(
             accelerator=train["accelerator"],
@@ -79,7 +78,7 @@ def fit(conf: dict[str, Any], train_path: str, val_path: str, num_edges: int, mo
             logger=logger if logger is not None else False,
             callbacks=[history, checkpoint, *early_stopping],
             log_every_n_steps=int(train["log_every_n_steps"]),
-            gradient_clip_val=train.get("gradient_clip"),
+            gradient_clip_val=train["gradient_clip"],
             enable_progress_bar=True,
             enable_model_summary=False,
             fast_dev_run=fast_dev_run,
@@ -140,6 +139,6 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         history.to_csv(tmp, index=False)
     write_json(outputs["metrics"], metrics)
     log.info("trained: %s", metrics)
-    if active and conf["train"].get("log_model", True):
+    if active and conf["train"]["log_model"]:
         log_mlflow_model(model)
     return metrics
