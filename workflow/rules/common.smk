@@ -38,9 +38,13 @@ wildcard_constraints:
 os.environ.setdefault(INVOCATION_ENV, new_invocation_id())
 
 
+# The library of this checkout (the one `pip install -e .` puts on the path), else the installed one.
+LIBRARY = Path(workflow.basedir) / "src" / "topoloc"
+
+
 def code(module):
     """Digest of a stage module's import closure in topoloc (MLflow/stage glue left out): editing it reruns the stage."""
-    return code_digest_of(module)
+    return code_digest_of(module, LIBRARY) if LIBRARY.is_dir() else code_digest_of(module)
 
 
 def local_osm_file(wildcards):
