@@ -7,7 +7,7 @@ import pytest
 
 from topoloc.errors import InputError
 from topoloc.place.pairs import IGNORE, PairSampler, heading_difference, pair_distances
-from topoloc.place.train_retrieval import PairBatches
+from topoloc.place.pair_data import PairBatches
 
 
 def two_streets() -> tuple[np.ndarray, np.ndarray]:

@@ -70,10 +70,11 @@ def test_training_outputs(stages):
     metrics = stages["train_metrics"]
     assert metrics["steps"] == 4 and metrics["epochs"] >= 0
     for name in ("clear_noon", "overcast", "sunset", "rain", "fog", "night"):
-        assert 0.0 <= metrics[f"val_acc_{name}"] <= 1.0
+        assert 0.0 <= metrics[f"best/val/acc_{name}"] <= 1.0
     assert {f"window_top1_{c}" for c in ("overcast", "fog", "night")} <= set(metrics)
     history = pd.read_csv(stages["retrieval"]["history"])
-    assert "train_loss" in history and history.val_loss.notna().any()
+    assert history["train/loss"].notna().any() and history["val/loss"].notna().any()
+    assert metrics["best/val/loss"] == pytest.approx(history["val/loss"].min())
     assert Path(stages["retrieval"]["figure"]).stat().st_size > 1000
 
 
