@@ -27,6 +27,7 @@ import pandas as pd
 import torch
 
 from topoloc.io import atomic_path
+from topoloc.tracking import tracking_uri
 
 #: The metric that picks the checkpoint (and drives early stopping).
 MONITOR = "val/loss"
@@ -166,8 +167,6 @@ def mlflow_logger() -> Any:
     """Lightning's MLFlowLogger bound to the active MLflow run, or None outside one."""
     import mlflow
     from lightning.pytorch.loggers import MLFlowLogger
-
-    from topoloc.tracking import tracking_uri
 
     active = mlflow.active_run()
     return MLFlowLogger(tracking_uri=tracking_uri(), run_id=active.info.run_id) if active else None

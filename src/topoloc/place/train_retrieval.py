@@ -1,22 +1,24 @@
 """Stage ``train_retrieval``: fit the siamese place-recognition network with Lightning.
 
-Data: the ``train`` place set (:mod:`topoloc.place.images`). Its last ``train.val_routes`` routes are for
-validation; the others for training, with pairs (:mod:`topoloc.place.pairs`) drawn among the conditions of
-``train.conditions`` only. Every epoch draws ``train.batches_per_epoch`` fresh batches of
-``train.batch_size`` pairs (seeded by ``train.seed`` and the epoch). With ``pairs.in_batch`` (default) the
-pairs of a batch are positives whose anchors come in groups from one street, and the loss is the
-cross-entropy of *every* anchor against *every* partner of the batch, labelled by the 2 m rule and
-balanced between the two labels (batch 32 gives 32 positives and about 790 negatives, a tenth of them
-hard, per 64 images embedded; pairs under the same condition are left out, as for the positives); without it, the sampler's positive / negative pairs are used one by one.
+Data: the ``train`` place set (:mod:`topoloc.place.images`), served by :class:`topoloc.place.pair_data.PairData`.
+Its last ``train.val_routes`` routes are for validation; the others for training, with pairs
+(:mod:`topoloc.place.pairs`) drawn among the conditions of ``train.conditions`` only. Every epoch draws
+``train.batches_per_epoch`` fresh batches of ``train.batch_size`` pairs (seeded by ``train.seed`` and the
+epoch). With ``pairs.in_batch`` (default) the pairs of a batch are positives whose anchors come in groups from
+one street, and the loss is the cross-entropy of *every* anchor against *every* partner of the batch, labelled
+by the 2 m rule and balanced between the two labels (batch 32 gives 32 positives and about 790 negatives, a
+tenth of them hard, per 64 images embedded; pairs under the same condition are left out, as for the
+positives); without it, the sampler's positive / negative pairs are used one by one.
 
-Validation: ``val_loss`` / ``val_acc`` on pairs of the validation routes among the training conditions
-(this picks the checkpoint); ``val_acc_<condition>`` on pairs of a training condition against each
+Validation: ``val/loss`` / ``val/acc`` on pairs of the validation routes among the training conditions
+(this picks the checkpoint); ``val/acc_<condition>`` on pairs of a training condition against each
 condition, held-out ones included (reported, never used for selection). After training,
 ``window_top1_<condition>``: on the validation routes, the share of places whose best-scoring place
 within ``localize.window`` places of the teach condition's sequence lies within 5 m (the localization's
 window search, with the truth at the window centre).
 
-The best checkpoint is written to ``model`` and logged to MLflow as a PyTorch model with its signature.
+Trained by :func:`topoloc.training.fit` (the path shared with ``train_rnn``): the best checkpoint is written to
+``model`` and logged to MLflow as a PyTorch model with its signature; ``metrics`` holds its ``best/val/*`` figures.
 """
 
 from __future__ import annotations
