@@ -14,6 +14,7 @@ from topoloc.errors import InputError
 from topoloc.place import build_topometric_map, localize_repeat, render_places, train_retrieval
 from topoloc.place.images import PlaceSet, polyline_distance, route_path
 from topoloc.place.localize_repeat import METHODS
+from topoloc.place.network import SiameseNet
 from topoloc.graph.road_graph import RoadGraph
 
 
@@ -75,6 +76,9 @@ def test_training_outputs(stages):
     history = pd.read_csv(stages["retrieval"]["history"])
     assert history["train/loss"].notna().any() and history["val/loss"].notna().any()
     assert metrics["best/val/loss"] == pytest.approx(history["val/loss"].min())
+    # the kept checkpoint carries the condition names of its val/acc_<condition> metrics
+    kept = SiameseNet.load_from_checkpoint(stages["retrieval"]["model"], map_location="cpu")
+    assert kept.condition_names == PlaceSet.load(stages["train"]["places"]).conditions
     assert Path(stages["retrieval"]["figure"]).stat().st_size > 1000
 
 
