@@ -1,24 +1,46 @@
-"""Lightning helpers shared by the training stages: the loss history, and the best checkpoint written to the
-stage's output only once training has finished."""
+"""The one training path of the Lightning stages (``train_rnn``, ``train_retrieval``).
+
+:func:`fit` seeds, builds the LightningModule, runs the Trainer on a LightningDataModule with the loss
+:class:`History` and a checkpoint of the lowest ``val/loss``, logs to the active MLflow run (the stage's run,
+opened by :mod:`topoloc.stage`) through Lightning's MLFlowLogger, writes the best checkpoint to the stage's
+output, restores it, and logs it to MLflow as a PyTorch model with its signature.
+
+Metric names follow Lightning's style: ``train/loss``, ``val/loss``, ``val/acc``, ... (logged by the modules).
+A fit's summary metrics are ``train_seconds``, ``epochs``, ``steps``, ``parameters``, and those of the kept
+checkpoint: ``best/epoch`` and ``best/<metric>`` for each validation metric at that epoch (``best/val/loss``, ...).
+"""
 
 from __future__ import annotations
 
 import shutil
 import tempfile
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import lightning as L
+import numpy as np
+import pandas as pd
+import torch
 
 from topoloc.io import atomic_path
+from topoloc.tracking import tracking_uri
+
+#: The metric that picks the checkpoint (and drives early stopping).
+MONITOR = "val/loss"
+TRAIN_LOSS = "train/loss"
+VAL_PREFIX = "val/"
+
+Module = TypeVar("Module", bound=L.LightningModule)
 
 
 class History(L.Callback):
-    """Training loss every ``every`` steps and the ``val_*`` metrics of every epoch, as rows for a table."""
+    """Training loss every ``every`` steps and the ``val/*`` metrics of every epoch, as rows for a table."""
 
-    def __init__(self, every: int = 10) -> None:
+    def __init__(self, every: int) -> None:
         self.every = every
         self.rows: list[dict[str, float]] = []
 
@@ -26,41 +48,172 @@ class History(L.Callback):
                            batch_idx: int) -> None:
         if trainer.global_step % self.every == 0 and outputs is not None:
             loss = outputs["loss"] if isinstance(outputs, dict) else outputs
-            self.rows.append({"step": trainer.global_step, "epoch": trainer.current_epoch, "train_loss": float(loss)})
+            self.rows.append({"step": trainer.global_step, "epoch": trainer.current_epoch, TRAIN_LOSS: float(loss)})
 
     def on_validation_epoch_end(self, trainer: L.Trainer, module: L.LightningModule) -> None:
         if trainer.sanity_checking:
             return
         row = {"step": trainer.global_step, "epoch": trainer.current_epoch}
-        row |= {k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("val_")}
+        row |= {k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith(VAL_PREFIX)}
         self.rows.append(row)
+
+    def frame(self) -> pd.DataFrame:
+        """The rows as a table: ``step``, ``epoch``, ``train/loss``, ``val/loss``, then the other metrics."""
+        columns = ["step", "epoch", TRAIN_LOSS, MONITOR]
+        columns += list(dict.fromkeys(k for row in self.rows for k in row if k not in columns))
+        return pd.DataFrame(self.rows, columns=columns)
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """Trainer settings of one fit (from the stage's ``train`` config section)."""
+
+    seed: int
+    max_epochs: int
+    max_time_min: float | None
+    accelerator: str
+    log_every_n_steps: int
+    gradient_clip: float | None
+    early_stopping_patience: int | None
+    sanity_val_steps: int
+    fast_dev_run: bool
+
+    @classmethod
+    def from_config(cls, train: Mapping[str, Any], *, gradient_clip: float | None,
+                    early_stopping_patience: int | None, sanity_val_steps: int, fast_dev_run: bool) -> FitSettings:
+        """The keys both trainings share (``seed``, ``max_epochs``, ``max_time_min``, ``accelerator``,
+        ``log_every_n_steps``) from ``train``; the others as given."""
+        max_time = train["max_time_min"]
+        return cls(seed=int(train["seed"]), max_epochs=int(train["max_epochs"]),
+                   max_time_min=float(max_time) if max_time is not None else None,
+                   accelerator=str(train["accelerator"]), log_every_n_steps=int(train["log_every_n_steps"]),
+                   gradient_clip=gradient_clip, early_stopping_patience=early_stopping_patience,
+                   sanity_val_steps=int(sanity_val_steps), fast_dev_run=bool(fast_dev_run))
+
+
+@dataclass(frozen=True)
+class LoggedModel:
+    """How the trained module is logged to MLflow: an input example, and how many leading axes are free
+    (1: the batch; 2: batch and sequence length). The signature is read off the module's output for it."""
+
+    example: np.ndarray
+    free_axes: int
+
+
+@dataclass(frozen=True)
+class FitResult(Generic[Module]):
+    """The restored best module (on the CPU), the :class:`History` table and the summary metrics."""
+
+    module: Module
+    history: pd.DataFrame
+    metrics: dict[str, float]
+
+
+def fit(build: Callable[[], Module], data: L.LightningDataModule, settings: FitSettings, model_path: str | Path, *,
+        callbacks: Sequence[L.Callback] = (), logged_model: LoggedModel | None = None) -> FitResult[Module]:
+    """Train the module of ``build`` on ``data``; write the best checkpoint to ``model_path`` and return it.
+
+    ``build`` runs right after seeding, so the initial weights come from ``settings.seed``. Inside an active
+    MLflow run the metrics go to that run, and with ``logged_model`` the best module is logged as a model.
+    """
+    L.seed_everything(settings.seed, workers=True, verbose=False)
+    module = build()
+    history = History(every=max(1, settings.log_every_n_steps))
+    extra = list(callbacks)
+    if settings.early_stopping_patience is not None:
+        extra.append(L.pytorch.callbacks.EarlyStopping(monitor=MONITOR, mode="min",
+                                                       patience=int(settings.early_stopping_patience)))
+    run_logger = mlflow_logger()
+    with best_checkpoint(model_path) as checkpoint:
+        trainer = L.Trainer(
+            accelerator=settings.accelerator,
+            devices=1,
+            max_epochs=settings.max_epochs,
+            max_time={"minutes": settings.max_time_min} if settings.max_time_min is not None else None,
+            logger=run_logger if run_logger is not None else False,
+            callbacks=[history, checkpoint, *extra],
+            log_every_n_steps=settings.log_every_n_steps,
+            gradient_clip_val=settings.gradient_clip,
+            num_sanity_val_steps=settings.sanity_val_steps,
+            enable_progress_bar=True,
+            enable_model_summary=False,
+            fast_dev_run=settings.fast_dev_run,
+            deterministic=True,
+        )
+        started = time.perf_counter()
+        trainer.fit(module, datamodule=data)
+        seconds = time.perf_counter() - started
+        module = keep_best(checkpoint, trainer, model_path, module)
+    frame = history.frame()
+    metrics = {"train_seconds": seconds, "epochs": float(trainer.current_epoch), "steps": float(trainer.global_step),
+               "parameters": float(sum(p.numel() for p in module.parameters()))}
+    metrics |= best_metrics(frame)
+    if run_logger is not None and logged_model is not None:
+        log_model(module, logged_model)
+    return FitResult(module, frame, metrics)
+
+
+def best_metrics(history: pd.DataFrame) -> dict[str, float]:
+    """``best/epoch`` and ``best/<metric>`` of the validation row of lowest ``val/loss`` (none without one)."""
+    rows = history.dropna(subset=[MONITOR])
+    if not len(rows):
+        return {}
+    best = rows.loc[rows[MONITOR].idxmin()]
+    out = {f"best/{k}": float(best[k]) for k in rows.columns if k.startswith(VAL_PREFIX) and pd.notna(best[k])}
+    return {"best/epoch": float(best.epoch), **out}
+
+
+def mlflow_logger() -> Any:
+    """Lightning's MLFlowLogger bound to the active MLflow run, or None outside one."""
+    import mlflow
+    from lightning.pytorch.loggers import MLFlowLogger
+
+    active = mlflow.active_run()
+    return MLFlowLogger(tracking_uri=tracking_uri(), run_id=active.info.run_id) if active else None
+
+
+def log_model(module: L.LightningModule, logged: LoggedModel) -> None:
+    """Log ``module`` to the active MLflow run as a PyTorch model with an input/output tensor signature."""
+    import mlflow
+    from mlflow.models import ModelSignature
+    from mlflow.types import Schema, TensorSpec
+
+    module = module.to("cpu").eval()
+    with torch.no_grad():
+        output = module(torch.as_tensor(logged.example)).numpy()
+    free = (-1,) * logged.free_axes
+    signature = ModelSignature(
+        inputs=Schema([TensorSpec(logged.example.dtype, free + logged.example.shape[logged.free_axes:])]),
+        outputs=Schema([TensorSpec(output.dtype, free + output.shape[logged.free_axes:])]),
+    )
+    mlflow.pytorch.log_model(module, name="model", signature=signature, input_example=logged.example)
 
 
 @contextmanager
 def best_checkpoint(model_path: str | Path) -> Iterator[L.pytorch.callbacks.ModelCheckpoint]:
-    """A callback keeping the checkpoint of lowest ``val_loss`` in a temporary folder beside ``model_path``.
+    """A callback keeping the checkpoint of lowest ``val/loss`` in a temporary folder beside ``model_path``.
 
     The folder is removed when the block ends, however it ends.
     """
     Path(model_path).parent.mkdir(parents=True, exist_ok=True)
     ckpt_dir = Path(tempfile.mkdtemp(prefix=".checkpoints-", dir=Path(model_path).parent))
     try:
-        yield L.pytorch.callbacks.ModelCheckpoint(dirpath=ckpt_dir, filename="best", monitor="val_loss", mode="min",
+        yield L.pytorch.callbacks.ModelCheckpoint(dirpath=ckpt_dir, filename="best", monitor=MONITOR, mode="min",
                                                   save_top_k=1)
     finally:
         shutil.rmtree(ckpt_dir, ignore_errors=True)
 
 
 def keep_best(checkpoint: L.pytorch.callbacks.ModelCheckpoint, trainer: L.Trainer, model_path: str | Path,
-              model: L.LightningModule) -> L.LightningModule:
+              module: Module) -> Module:
     """Copy the best checkpoint to ``model_path`` atomically and return it loaded on the CPU.
 
-    Without one (``fast_dev_run`` saves none) the trainer's final state is written and ``model`` returned.
+    Without one (``fast_dev_run`` saves none) the trainer's final state is written and ``module`` returned.
     """
     best = checkpoint.best_model_path
     with atomic_path(model_path) as tmp:
         if not best:
             trainer.save_checkpoint(tmp)
-            return model
+            return module
         shutil.copyfile(best, tmp)
-    return type(model).load_from_checkpoint(best, map_location="cpu")
+    return type(module).load_from_checkpoint(best, map_location="cpu")

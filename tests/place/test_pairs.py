@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from topoloc.errors import InputError
+from topoloc.place.pair_data import PairBatches
 from topoloc.place.pairs import IGNORE, PairSampler, heading_difference, pair_distances
-from topoloc.place.train_retrieval import PairBatches
 
 
 def two_streets() -> tuple[np.ndarray, np.ndarray]:

@@ -14,6 +14,7 @@ from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.place import build_topometric_map, localize_repeat, render_places, train_retrieval
 from topoloc.place.images import PlaceSet, polyline_distance, route_path
+from topoloc.place.network import SiameseNet
 
 
 def outputs(root: Path, names: dict[str, str]) -> dict[str, str]:
@@ -69,10 +70,14 @@ def test_training_outputs(stages):
     metrics = stages["train_metrics"]
     assert metrics["steps"] == 4 and metrics["epochs"] >= 0
     for name in ("clear_noon", "overcast", "sunset", "rain", "fog", "night"):
-        assert 0.0 <= metrics[f"val_acc_{name}"] <= 1.0
+        assert 0.0 <= metrics[f"best/val/acc_{name}"] <= 1.0
     assert {f"window_top1_{c}" for c in ("overcast", "fog", "night")} <= set(metrics)
     history = pd.read_csv(stages["retrieval"]["history"])
-    assert "train_loss" in history and history.val_loss.notna().any()
+    assert history["train/loss"].notna().any() and history["val/loss"].notna().any()
+    assert metrics["best/val/loss"] == pytest.approx(history["val/loss"].min())
+    # the kept checkpoint carries the condition names of its val/acc_<condition> metrics
+    kept = SiameseNet.load_from_checkpoint(stages["retrieval"]["model"], map_location="cpu")
+    assert kept.condition_names == PlaceSet.load(stages["train"]["places"]).conditions
     assert Path(stages["retrieval"]["figure"]).stat().st_size > 1000
 
 

@@ -87,7 +87,8 @@ def test_overfits_small_map_to_full_last_step_accuracy(small_dataset):
     model, history, metrics = fit(conf, str(tmp / "train.parquet"), str(tmp / "train.parquet"), graph.num_edges, str(tmp / "model.ckpt"))
     table = accuracy_by_position(predict(model, tokens), labels)
     assert table.set_index("position").loc["last", "accuracy"] == 1.0
-    assert len(history.dropna(subset=["val_loss"])) >= 2
+    assert len(history.dropna(subset=["val/loss"])) >= 2
+    assert metrics["best/val/loss"] == pytest.approx(history["val/loss"].min())
     reloaded = TrajectoryRNN.load_from_checkpoint(tmp / "model.ckpt", map_location="cpu")
     assert all(np.array_equal(a, b) for a, b in zip(predict(reloaded, tokens), predict(model, tokens)))
 

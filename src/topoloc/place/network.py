@@ -231,15 +231,15 @@ class SiameseNet(L.LightningModule):
             loss = F.cross_entropy(logits, label)
             acc = (logits.argmax(1) == label).float().mean()
         opts = {"on_epoch": True, "batch_size": len(a), "add_dataloader_idx": False}
-        self.log(f"{stage}_loss", loss, prog_bar=True, on_step=stage == "train", **opts)
-        self.log(f"{stage}_acc", acc, prog_bar=stage == "val", on_step=False, **opts)
+        self.log(f"{stage}/loss", loss, prog_bar=True, on_step=stage == "train", **opts)
+        self.log(f"{stage}/acc", acc, prog_bar=stage == "val", on_step=False, **opts)
         return loss
 
     def training_step(self, batch: Any, batch_idx: int) -> torch.Tensor:
         return self._step(batch, "train")
 
     def validation_step(self, batch: Any, batch_idx: int, dataloader_idx: int = 0) -> None:
-        """Loader 0: ``val_loss`` / ``val_acc``; loader 1 (items carry a condition index): ``val_acc_<condition>``."""
+        """Loader 0: ``val/loss`` / ``val/acc``; loader 1 (items carry a condition index): ``val/acc_<condition>``."""
         if dataloader_idx == 0:
             self._step(batch, "val")
             return
@@ -250,7 +250,7 @@ class SiameseNet(L.LightningModule):
         for k in condition.unique().tolist():
             sel = condition == k
             name = names[k] if k < len(names) else str(k)
-            self.log(f"val_acc_{name}", correct[sel].mean(), on_epoch=True, batch_size=int(sel.sum()),
+            self.log(f"val/acc_{name}", correct[sel].mean(), on_epoch=True, batch_size=int(sel.sum()),
                      add_dataloader_idx=False)
 
     def configure_optimizers(self) -> Any:
@@ -258,3 +258,10 @@ class SiameseNet(L.LightningModule):
         optimizer = torch.optim.RAdam(self.parameters(), lr=hp.lr, weight_decay=hp.weight_decay)
         scheduler = torch.optim.lr_scheduler.ExponentialLR(optimizer, gamma=hp.lr_decay)
         return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
+
+    def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        # the names of the val/acc_<condition> metrics travel with the weights (the best checkpoint is reloaded)
+        checkpoint["condition_names"] = list(getattr(self, "condition_names", None) or [])
+
+    def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        self.condition_names = list(checkpoint.get("condition_names", []))

@@ -28,19 +28,19 @@ def _save(fig: Any, path: str | Path) -> None:
 def training_figure(history: pd.DataFrame, metrics: dict[str, float], path: str | Path) -> None:
     """Training / validation loss, and validation pair accuracy per condition, against the step."""
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
-    if "train_loss" in history:
-        rows = history.dropna(subset=["train_loss"])
-        ax1.plot(rows.step, rows.train_loss, lw=0.8, alpha=0.7, label="train (batch)")
-    if "val_loss" in history:
-        rows = history.dropna(subset=["val_loss"])
-        ax1.plot(rows.step, rows.val_loss, "o-", label="validation (training conditions)")
+    if "train/loss" in history:
+        rows = history.dropna(subset=["train/loss"])
+        ax1.plot(rows.step, rows["train/loss"], lw=0.8, alpha=0.7, label="train (batch)")
+    if "val/loss" in history:
+        rows = history.dropna(subset=["val/loss"])
+        ax1.plot(rows.step, rows["val/loss"], "o-", label="validation (training conditions)")
     ax1.set_xlabel("step")
     ax1.set_ylabel("cross-entropy")
     ax1.legend()
     ax1.set_title("siamese network loss")
-    for col in sorted(c for c in history.columns if c.startswith("val_acc_")):
+    for col in sorted(c for c in history.columns if c.startswith("val/acc_")):
         rows = history.dropna(subset=[col])
-        ax2.plot(rows.step, rows[col], "o-", ms=3, label=col.removeprefix("val_acc_"))
+        ax2.plot(rows.step, rows[col], "o-", ms=3, label=col.removeprefix("val/acc_"))
     ax2.set_xlabel("step")
     ax2.set_ylabel("pair accuracy (validation routes)")
     ax2.set_ylim(0.4, 1.0)

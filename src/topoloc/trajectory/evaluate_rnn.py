@@ -77,12 +77,12 @@ def plot_loss(history: pd.DataFrame, path: str, title: str) -> None:
     """Fig. 8a: training loss (per logged step) and validation loss (per epoch) against epochs."""
     fig, ax = plt.subplots(figsize=(6, 4))
     steps_per_epoch = max(1.0, history.step.max() / max(1.0, history.epoch.max() + 1)) if len(history) else 1.0
-    train = history.dropna(subset=["train_loss"])
-    val = history.dropna(subset=["val_loss"])
-    ax.plot(train.step / steps_per_epoch, train.train_loss, lw=0.8, alpha=0.7, label="training loss (batch)")
+    train = history.dropna(subset=["train/loss"])
+    val = history.dropna(subset=["val/loss"])
+    ax.plot(train.step / steps_per_epoch, train["train/loss"], lw=0.8, alpha=0.7, label="training loss (batch)")
     if len(train) > 10:
-        ax.plot(train.step / steps_per_epoch, train.train_loss.rolling(max(3, len(train) // 30), min_periods=1).mean(), lw=1.5, label="training loss (smoothed)")
-    ax.plot(val.step / steps_per_epoch, val.val_loss, "o-", label="validation loss")
+        ax.plot(train.step / steps_per_epoch, train["train/loss"].rolling(max(3, len(train) // 30), min_periods=1).mean(), lw=1.5, label="training loss (smoothed)")
+    ax.plot(val.step / steps_per_epoch, val["val/loss"], "o-", label="validation loss")
     ax.set_xlabel("epoch")
     ax.set_ylabel("cross-entropy (NLL)")
     ax.set_title(title)

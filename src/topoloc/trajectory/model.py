@@ -84,7 +84,7 @@ class TrajectoryRNN(L.LightningModule):
             state_loss = (self.loss(aux[..., :2].reshape(-1, 2), directions.reshape(-1))
                           + self.loss(aux[..., 2:].reshape(-1, MAX_OFFSET + 1), offsets.reshape(-1)))
             loss = edge_loss + self.hparams.state_loss_weight * state_loss
-            self.log(f"{stage}_state_loss", state_loss, on_step=False, on_epoch=True, batch_size=len(lengths))
+            self.log(f"{stage}/state_loss", state_loss, on_step=False, on_epoch=True, batch_size=len(lengths))
         with torch.no_grad():
             pred = logits.argmax(-1)
             mask = labels != IGNORE
@@ -93,9 +93,9 @@ class TrajectoryRNN(L.LightningModule):
             last = (pred[rows, lengths - 1] == labels[rows, lengths - 1]).float().mean()
         on_step = stage == "train"
         # the edge cross-entropy: comparable with and without the auxiliary losses
-        self.log(f"{stage}_loss", edge_loss, prog_bar=True, on_step=on_step, on_epoch=True, batch_size=len(lengths))
-        self.log(f"{stage}_acc", acc, on_step=False, on_epoch=True, batch_size=len(lengths))
-        self.log(f"{stage}_acc_last", last, prog_bar=stage == "val", on_step=False, on_epoch=True, batch_size=len(lengths))
+        self.log(f"{stage}/loss", edge_loss, prog_bar=True, on_step=on_step, on_epoch=True, batch_size=len(lengths))
+        self.log(f"{stage}/acc", acc, on_step=False, on_epoch=True, batch_size=len(lengths))
+        self.log(f"{stage}/acc_last", last, prog_bar=stage == "val", on_step=False, on_epoch=True, batch_size=len(lengths))
         return loss
 
     def training_step(self, batch: Any, batch_idx: int) -> torch.Tensor:
@@ -119,7 +119,7 @@ class TrajectoryRNN(L.LightningModule):
         if hp.lr_schedule == "plateau":
             # multiply the learning rate by plateau_factor when the validation loss stops improving
             scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(optimizer, factor=hp.plateau_factor, patience=hp.plateau_patience)
-            return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "monitor": "val_loss", "interval": "epoch"}}
+            return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "monitor": "val/loss", "interval": "epoch"}}
         return optimizer
 
 
