@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from topoloc.geometry import quantize_angle, straight_token, virtual_node_count
+from topoloc.geometry import point_along, quantize_angle, straight_token, virtual_node_count
 
 
 @dataclass(frozen=True)
@@ -76,8 +76,6 @@ def polyline_end_headings(coords: ArrayLike, lookahead_m: float) -> tuple[float,
     Using the geometry near the ends, not the chord, gives the direction in
     which a curved road leaves and enters its intersections.
     """
-    from topoloc.geometry import point_along
-
     pts = np.asarray(coords, dtype=float)
     length = float(np.hypot(*np.diff(pts, axis=0).T).sum())
     reach = min(lookahead_m, length / 2.0) if length > 0 else 0.0

@@ -1,6 +1,6 @@
 # Library code per stage (editing a module reruns exactly the stages that use it).
 TRAJECTORY_DATA_CODE = ["encoding.py", "trajectory/paths.py", "trajectory/dataset.py", "trajectory/generate_dataset.py",
-                        "odometry/segment_trajectory.py"]
+                        "segmentation.py"]
 
 
 rule generate_dataset:
