@@ -35,7 +35,7 @@ from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.rnn import edge_log_probs, load_model
 from topoloc.localization.roadmap import Odometry, RoadMap
 from topoloc.localizer import make, registry
-from topoloc.odometry.poses import read_poses
+from topoloc.motion.poses import read_poses
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -34,7 +34,7 @@ import yaml
 
 from topoloc.encoding import encode_segments
 from topoloc.odometry.evaluate import kitti_errors
-from topoloc.odometry.poses import planar_track, read_calib, read_poses
+from topoloc.motion.poses import planar_track, read_calib, read_poses
 from topoloc.segmentation import segment_track
 from topoloc.odometry.stereo_vo import relative_motion, run_stereo_vo
 from topoloc.odometry.synthetic import known_path, write_sequence

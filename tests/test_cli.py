@@ -17,7 +17,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "trajectory"))
 from localization_helpers import irregular_grid
 
 from topoloc.cli import main
-from topoloc.odometry.poses import poses_from_planar, write_poses
+from topoloc.motion.poses import poses_from_planar, write_poses
 
 REPO = Path(__file__).resolve().parents[1]
 ROUTE = [0, 1, 6, 7, 8, 13, 14, 9, 4]

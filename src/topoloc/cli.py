@@ -43,8 +43,8 @@ def load_conf(path: str | None) -> dict[str, Any]:
 
 
 def _georeference(args: argparse.Namespace, track: np.ndarray, yaw0: float, crs: str):
-    from topoloc.odometry.georef import fit_rigid, from_origin, grid_heading_deg, to_map
-    from topoloc.odometry.poses import read_gps
+    from topoloc.motion.georef import fit_rigid, from_origin, grid_heading_deg, to_map
+    from topoloc.motion.poses import read_gps
 
     if args.gps:
         gps = read_gps(args.gps, len(track))
@@ -79,7 +79,7 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     from topoloc.localization.rnn import load_model
     from topoloc.localization.roadmap import Odometry, RoadMap
     from topoloc.localizer import make, registry
-    from topoloc.odometry.poses import planar_yaw, read_poses
+    from topoloc.motion.poses import planar_yaw, read_poses
 
     names = _names(args)
     conf = load_conf(args.config)

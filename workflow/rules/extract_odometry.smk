@@ -20,7 +20,7 @@ rule extract_odometry:
         ),
     params:
         conf=lambda wildcards: {**config["odometry"], "drive": wildcards.drive},
-        code=code("odometry"),
+        code=code("odometry", "motion"),
     log:
         "results/{region}/logs/extract_odometry_{drive}.log",
     benchmark:

@@ -1,6 +1,6 @@
 # Temporally consistent localization of the test drives, its evaluation, and the HTML report.
 LOCALIZATION_CODE = ["localizer.py", "localizers", "localization", "trajectory/model.py", "trajectory/dataset.py",
-                     "graph/road_graph.py", "encoding.py", "segmentation.py", "odometry/poses.py"]
+                     "graph/road_graph.py", "encoding.py", "segmentation.py", "motion"]
 
 
 rule decode_trajectories:

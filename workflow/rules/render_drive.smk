@@ -22,7 +22,7 @@ rule render_drive:
         drive=r"ren\d+_[a-z][a-z0-9_]*",
     params:
         conf=lambda wildcards: {**config["render"], "drive": wildcards.drive},
-        code=code("render", "odometry/simulate.py", "odometry/poses.py", "odometry/georef.py", "graph/road_graph.py"),
+        code=code("render", "motion", "graph/road_graph.py"),
     log:
         "results/{region}/logs/render_drive_{drive}.log",
     benchmark:

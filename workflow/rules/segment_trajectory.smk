@@ -19,7 +19,7 @@ rule segment_trajectory:
             "encoding": config["encoding"],
             "drive": wildcards.drive,
         },
-        code=code("odometry", "encoding.py"),
+        code=code("odometry", "encoding.py", "segmentation.py"),
     log:
         "results/{region}/logs/segment_trajectory_{drive}.log",
     benchmark:

@@ -29,7 +29,7 @@ from topoloc.localization.localize import write_geojson
 from topoloc.localization.rnn import load_model
 from topoloc.localization.roadmap import Odometry, RoadMap
 from topoloc.localizer import Localizer, check_names, make, registry
-from topoloc.odometry.poses import read_poses
+from topoloc.motion.poses import read_poses
 
 log = logging.getLogger(__name__)
 

@@ -38,7 +38,7 @@ from topoloc.render.conditions import get_condition
 from topoloc.render.render_drive import drive_path, drive_scene
 from topoloc.render.renderer import Renderer
 from topoloc.render.rig import StereoRig
-from topoloc.render.route import CameraPath, render_route
+from topoloc.motion.route import CameraPath, render_route
 
 
 @dataclass

@@ -1,7 +1,7 @@
 """Stage ``render_drive``: a rendered stereo drive on the region's map, written as a KITTI sequence.
 
 Drive ``ren<RR>_<condition>`` is route ``RR`` (a smooth random route on the road graph, seeded by
-``render.seed`` and ``RR``, see :mod:`topoloc.render.route`) seen under ``condition``: all conditions of
+``render.seed`` and ``RR``, see :mod:`topoloc.motion.route`) seen under ``condition``: all conditions of
 one route share the path, the buildings and their textures, so the same places look different only by
 their appearance. Outputs, beside each other in ``results/{region}/render/{drive}/``:
 
@@ -36,13 +36,13 @@ from tqdm import tqdm
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json, write_text
-from topoloc.odometry.georef import Georeference
-from topoloc.odometry.poses import poses_from_planar, write_poses
+from topoloc.motion.georef import Georeference
+from topoloc.motion.poses import poses_from_planar, write_poses
 from topoloc.render.conditions import get_condition
 from topoloc.render.plot import contact_sheet
 from topoloc.render.renderer import Renderer
 from topoloc.render.rig import StereoRig
-from topoloc.render.route import CameraPath, render_route
+from topoloc.motion.route import CameraPath, render_route
 from topoloc.render.scene import Scene, scene_for_path
 
 log = logging.getLogger(__name__)
