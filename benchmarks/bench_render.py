@@ -35,8 +35,8 @@ import pyrosm  # noqa: E402
 import yaml  # noqa: E402
 
 from topoloc.graph.build_graph import build_road_graph  # noqa: E402
-from topoloc.odometry.evaluate import evaluate  # noqa: E402
 from topoloc.motion.poses import read_poses  # noqa: E402
+from topoloc.odometry.evaluate import evaluate  # noqa: E402
 from topoloc.odometry.stereo_vo import run_stereo_vo  # noqa: E402
 from topoloc.render import render_drive  # noqa: E402
 from topoloc.render.conditions import CONDITIONS, get_condition  # noqa: E402

@@ -13,8 +13,8 @@ import pytest
 from tests.conftest import write_osm
 from tests.render.conftest import render_conf, render_outputs
 from topoloc.errors import InputError
-from topoloc.odometry import extract_odometry
 from topoloc.motion.poses import read_calib, read_gps, read_poses, read_times
+from topoloc.odometry import extract_odometry
 from topoloc.render import render_drive
 from topoloc.render.rig import StereoRig
 from topoloc.render.scene import read_buildings

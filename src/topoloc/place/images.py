@@ -34,11 +34,11 @@ from tqdm import tqdm
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
+from topoloc.motion.route import CameraPath, render_route
 from topoloc.render.conditions import get_condition
 from topoloc.render.render_drive import drive_path, drive_scene
 from topoloc.render.renderer import Renderer
 from topoloc.render.rig import StereoRig
-from topoloc.motion.route import CameraPath, render_route
 
 
 @dataclass

@@ -38,11 +38,11 @@ from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json, write_text
 from topoloc.motion.georef import Georeference
 from topoloc.motion.poses import poses_from_planar, write_poses
+from topoloc.motion.route import CameraPath, render_route
 from topoloc.render.conditions import get_condition
 from topoloc.render.plot import contact_sheet
 from topoloc.render.renderer import Renderer
 from topoloc.render.rig import StereoRig
-from topoloc.motion.route import CameraPath, render_route
 from topoloc.render.scene import Scene, scene_for_path
 
 log = logging.getLogger(__name__)
