@@ -37,8 +37,8 @@ from topoloc.place.localize import (MATCH, RELOC_FAIL, RELOC_OK, CorrelationScor
                                     Trace, correlation_descriptors, localize, nearest_vertex)
 from topoloc.place.markov import FilterSettings, markov_localize
 from topoloc.place.odometry import noisy_odometry
-from topoloc.place.render_places import check_conditions
 from topoloc.place.topometric_map import TopometricMap
+from topoloc.render.conditions import check_conditions
 
 log = logging.getLogger(__name__)
 

@@ -37,7 +37,7 @@ from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json
 from topoloc.place.images import PlaceSet
 from topoloc.place.pairs import IGNORE, PairSampler, Pairs
-from topoloc.place.render_places import check_conditions
+from topoloc.render.conditions import check_conditions
 from topoloc.place.network import SiameseNet
 
 log = logging.getLogger(__name__)
