@@ -2,7 +2,7 @@
 # Library code per stage (editing a module reruns exactly the stages that use it).
 PLACE_IMAGE_CODE = ["render", "graph/road_graph.py", "motion",
                     "place/images.py", "place/render_places.py"]
-PLACE_MODEL_CODE = ["place/render_places.py", "place/images.py", "place/network.py", "place/pairs.py", "training.py",
+PLACE_MODEL_CODE = ["render/conditions.py", "place/images.py", "place/network.py", "place/pairs.py", "training.py",
                     "place/train_retrieval.py"]
 PLACE_MAP_CODE = ["place/odometry.py", "motion/noise.py", "place/localize.py", "place/topometric_map.py", "place/build_topometric_map.py",
                   "place/plot.py"]

@@ -36,7 +36,9 @@ from topoloc.place.images import PlaceSet
 from topoloc.place.localize import (MATCH, RELOC_FAIL, RELOC_OK, CorrelationScorer, LocalizeSettings, NetworkScorer,
                                     Trace, correlation_descriptors, localize, nearest_vertex)
 from topoloc.place.markov import FilterSettings, markov_localize
+from topoloc.place.network import load_model
 from topoloc.place.odometry import noisy_odometry
+from topoloc.place.plot import bars_figure, errors_figure
 from topoloc.place.topometric_map import TopometricMap
 from topoloc.render.conditions import check_conditions
 
@@ -119,9 +121,6 @@ def tables_markdown(summary: pd.DataFrame, names: dict[str, list[str]], facts: d
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
     """Localize every repeat condition of ``inputs['repeat']`` on ``inputs['map']`` with ``inputs['model']``."""
-    from topoloc.place.plot import bars_figure, errors_figure
-    from topoloc.place.train_retrieval import load_model
-
     torch.set_num_threads(int(conf["threads"]))
     names = check_conditions(conf)
     model = load_model(inputs["model"])

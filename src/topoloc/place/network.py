@@ -22,6 +22,7 @@ embeds images once and :meth:`SiameseNet.same_place` scores embeddings against e
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import lightning as L
@@ -30,6 +31,8 @@ import torch
 from numpy.typing import NDArray
 from torch import nn
 from torch.nn import functional as F
+
+from topoloc.errors import InputError
 
 
 class BasicBlock(nn.Module):
@@ -258,3 +261,12 @@ class SiameseNet(L.LightningModule):
         optimizer = torch.optim.RAdam(self.parameters(), lr=hp.lr, weight_decay=hp.weight_decay)
         scheduler = torch.optim.lr_scheduler.ExponentialLR(optimizer, gamma=hp.lr_decay)
         return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
+
+
+def load_model(path: str | Path) -> SiameseNet:
+    """The trained network of a ``train_retrieval`` checkpoint, on the CPU, in eval mode."""
+    try:
+        model = SiameseNet.load_from_checkpoint(str(path), map_location="cpu")
+    except (OSError, RuntimeError, KeyError) as err:
+        raise InputError(path, f"not a retrieval model checkpoint ({err})") from err
+    return model.eval()

@@ -38,7 +38,9 @@ from topoloc.io import atomic_path, write_json
 from topoloc.place.images import PlaceSet
 from topoloc.place.pairs import IGNORE, PairSampler, Pairs
 from topoloc.render.conditions import check_conditions
+from topoloc.tracking import tracking_uri
 from topoloc.place.network import SiameseNet
+from topoloc.place.plot import training_figure
 
 log = logging.getLogger(__name__)
 
@@ -141,15 +143,6 @@ def build_model(conf: dict[str, Any], in_channels: int, names: list[str]) -> Sia
             raise InputError("place.network.weights", f"{path}: does not fit the configured network ({str(err)[:200]})") from err
         log.info("loaded weights %s (missing %d, unexpected %d keys)", path, len(missing), len(unexpected))
     return model
-
-
-def load_model(path: str | Path) -> SiameseNet:
-    """The trained network of a ``train_retrieval`` checkpoint, on the CPU, in eval mode."""
-    try:
-        model = SiameseNet.load_from_checkpoint(str(path), map_location="cpu")
-    except (OSError, RuntimeError, KeyError) as err:
-        raise InputError(path, f"not a retrieval model checkpoint ({err})") from err
-    return model.eval()
 
 
 @torch.no_grad()
@@ -255,11 +248,8 @@ def log_mlflow_model(model: SiameseNet, example: np.ndarray) -> None:
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
     """Train on ``inputs['places']``; write ``model``, ``history``, ``metrics`` and ``figure``."""
-    import mlflow
+    import mlflow  # the MLflow client is slow to import: only when the stage runs
     from lightning.pytorch.loggers import MLFlowLogger
-
-    from topoloc.place.plot import training_figure
-    from topoloc.tracking import tracking_uri
 
     places = PlaceSet.load(inputs["places"])
     active = mlflow.active_run()

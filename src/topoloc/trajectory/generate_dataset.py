@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from topoloc.encoding import check_encoding
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json, write_text
@@ -19,14 +20,6 @@ from topoloc.trajectory.dataset import Noise, PathEncoder, ShardWriter
 from topoloc.trajectory.paths import sample_paths
 
 log = logging.getLogger(__name__)
-
-
-def check_encoding(encoding: dict[str, Any]) -> int:
-    """The number of angle bins, checked (``encoding.angle_bins`` >= 4)."""
-    bins = encoding.get("angle_bins", 20)
-    if int(bins) != bins or bins < 4:
-        raise InputError("encoding.angle_bins", f"must be an integer >= 4, got {bins}")
-    return int(bins)
 
 
 def generate(graph: RoadGraph, conf: dict[str, Any], train_path: str, val_path: str) -> dict[str, Any]:

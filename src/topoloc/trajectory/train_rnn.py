@@ -18,10 +18,11 @@ import numpy as np
 import pandas as pd
 import torch
 
-from topoloc.training import History, best_checkpoint, keep_best
+from topoloc.encoding import check_encoding
 from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json
-from topoloc.trajectory.generate_dataset import check_encoding
+from topoloc.tracking import tracking_uri
+from topoloc.training import History, best_checkpoint, keep_best
 from topoloc.trajectory.model import TrajectoryData, TrajectoryRNN
 
 log = logging.getLogger(__name__)
@@ -129,8 +130,6 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     """Train on ``inputs`` train/val/stats; write ``model``, ``history`` and ``metrics``."""
     import mlflow
     from lightning.pytorch.loggers import MLFlowLogger
-
-    from topoloc.tracking import tracking_uri
 
     stats = json.loads(Path(inputs["stats"]).read_text())
     active = mlflow.active_run()
