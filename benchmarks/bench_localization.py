@@ -32,10 +32,11 @@ from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.decoders import beam_decode
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start, start_frames, summarize
 from topoloc.localization.oracle import Oracle, true_path
-from topoloc.localization.rnn import edge_log_probs, load_model
+from topoloc.localization.rnn import edge_log_probs
 from topoloc.localization.roadmap import Odometry, RoadMap
-from topoloc.odometry.poses import read_poses
+from topoloc.motion.poses import read_poses
 from topoloc.registry import make, registry
+from topoloc.trajectory.model import load_model
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -33,11 +33,11 @@ import numpy as np
 
 from topoloc.config import load
 from topoloc.encoding import encode_segments
+from topoloc.motion.poses import planar_track, read_calib, read_poses
 from topoloc.odometry.evaluate import kitti_errors
-from topoloc.odometry.poses import planar_track, read_calib, read_poses
-from topoloc.odometry.segment_trajectory import segment_track
 from topoloc.odometry.stereo_vo import relative_motion, run_stereo_vo
 from topoloc.odometry.synthetic import known_path, write_sequence
+from topoloc.segmentation import segment_track
 
 REPO = Path(__file__).resolve().parents[1]
 KITTI00 = REPO.parent / "shared" / "data" / "kitti00"

@@ -32,7 +32,7 @@ import pandas as pd
 import torch
 
 from topoloc.place.images import PlaceSet
-from topoloc.place.train_retrieval import load_model
+from topoloc.place.network import load_model
 
 
 def embedding_speed(model_path: Path, places_path: Path, threads: int, repeats: int, n: int = 1024) -> dict[str, float]:

@@ -35,10 +35,10 @@ import pyrosm  # noqa: E402
 
 from topoloc.config import load  # noqa: E402
 from topoloc.graph.build_graph import build_road_graph  # noqa: E402
+from topoloc.motion.poses import read_poses  # noqa: E402
 from topoloc.odometry.evaluate import evaluate  # noqa: E402
-from topoloc.odometry.poses import read_poses  # noqa: E402
 from topoloc.odometry.stereo_vo import run_stereo_vo  # noqa: E402
-from topoloc.render import render_drive  # noqa: E402
+from topoloc.render import drives, render_drive  # noqa: E402
 from topoloc.render.conditions import CONDITIONS, get_condition  # noqa: E402
 from topoloc.render.renderer import Renderer  # noqa: E402
 from topoloc.render.rig import StereoRig  # noqa: E402
@@ -96,9 +96,9 @@ def main() -> None:
         graph, _ = build_road_graph(osm, config["graph"]["highway_classes"], float(config["graph"]["virtual_node_spacing_m"]))
         graph_file = Path(tmp) / "graph.graphml"
         graph.save_graphml(graph_file)
-        path = render_drive.drive_path(graph, conf, 0)
+        path = drives.drive_path(graph, conf, 0)
         started = time.perf_counter()
-        scene = render_drive.drive_scene(osm, graph, path, conf)
+        scene = drives.drive_scene(osm, graph, path, conf)
         print(f"route ren00: {len(path.xy)} frames, {path.length_m:.0f} m; scene {scene.facts()} built in "
               f"{time.perf_counter() - started:.2f} s\n")
         print("| size | condition | pairs/s (wall clock) | pairs per CPU second | pairs per CPU second incl. PNG writing | target |")
@@ -106,7 +106,7 @@ def main() -> None:
         for size_text in [] if args.skip_speed else args.sizes.split(","):
             size = tuple(int(v) for v in size_text.split("x"))
             for condition in conditions:
-                s = speed(scene, path, size, condition, args.pairs, render_drive.route_seed(conf, 0), conf)
+                s = speed(scene, path, size, condition, args.pairs, drives.route_seed(conf, 0), conf)
                 target = ">= 30" if size == (620, 188) else ""
                 print(f"| {size[0]}x{size[1]} | {condition} | {s['wall']:.1f} | {s['cpu']:.1f} | {s['png']:.1f} | {target} |",
                       flush=True)

@@ -18,7 +18,7 @@ from localization_helpers import irregular_grid
 
 from topoloc.cli import main
 from topoloc.graph.road_graph import RoadGraph
-from topoloc.odometry.poses import poses_from_planar, write_poses
+from topoloc.motion.poses import poses_from_planar, write_poses
 
 REPO = Path(__file__).resolve().parents[1]
 ROUTE = [0, 1, 6, 7, 8, 13, 14, 9, 4]

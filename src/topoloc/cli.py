@@ -28,24 +28,30 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import pyproj
 
+from topoloc.config import load
 from topoloc.errors import InputError
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.io import atomic_path
+from topoloc.localization.localize import check_explained, check_on_map, write_geojson
+from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.localizer import ROAD_OBSERVATIONS
+from topoloc.motion.georef import fit_rigid, from_origin, grid_heading_deg, to_map
+from topoloc.motion.poses import planar_yaw, read_gps, read_poses
+from topoloc.registry import check_names, make, registry
+from topoloc.trajectory.model import load_model
 
 log = logging.getLogger("topoloc")
 
 
 def load_conf(path: str | None, overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """The pipeline config of ``path`` (or the schema defaults) with ``overrides``, validated: the slices a localizer reads."""
-    from topoloc.config import load
-
     conf = load(path, overrides)
     return {k: conf[k] for k in ("localization", "segmentation", "encoding")}
 
 
 def _georeference(args: argparse.Namespace, track: np.ndarray, yaw0: float, crs: str):
-    from topoloc.odometry.georef import fit_rigid, from_origin, grid_heading_deg, to_map
-    from topoloc.odometry.poses import read_gps
-
     if args.gps:
         gps = read_gps(args.gps, len(track))
         return fit_rigid(track, to_map(crs, gps[:, 0], gps[:, 1]))
@@ -59,9 +65,6 @@ def _georeference(args: argparse.Namespace, track: np.ndarray, yaw0: float, crs:
 
 
 def _names(args: argparse.Namespace) -> list[str]:
-    from topoloc.localizer import ROAD_OBSERVATIONS
-    from topoloc.registry import check_names
-
     names = [n.strip() for n in args.decoder.split(",") if n.strip()]
     if not names:
         raise InputError("--decoder", "name at least one localizer")
@@ -73,16 +76,6 @@ def _names(args: argparse.Namespace) -> list[str]:
 
 def localize(args: argparse.Namespace) -> dict[str, Any]:
     """The ``localize`` subcommand: returns a short summary (also printed)."""
-    import pyproj
-
-    from topoloc.graph.road_graph import RoadGraph
-    from topoloc.localization.localize import check_explained, check_on_map, write_geojson
-    from topoloc.localization.rnn import load_model
-    from topoloc.localization.roadmap import Odometry, RoadMap
-    from topoloc.localizer import ROAD_OBSERVATIONS
-    from topoloc.odometry.poses import planar_yaw, read_poses
-    from topoloc.registry import make, registry
-
     names = _names(args)
     conf = load_conf(args.config, {"localization": {"decode": {"k": args.k}}} if args.k is not None else None)
     graph = RoadGraph.load(args.graph)
@@ -122,8 +115,6 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     table = pd.concat(tables, ignore_index=True)
     out = Path(args.out)
     csv_path, geojson_path = out.with_name(out.name + ".csv"), out.with_name(out.name + ".geojson")
-    from topoloc.io import atomic_path
-
     with atomic_path(csv_path) as tmp:
         table.to_csv(tmp, index=False, float_format="%.7g")
     first = table[table.localizer == names[0]]

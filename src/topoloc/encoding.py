@@ -15,11 +15,13 @@ one convention; see :mod:`topoloc.geometry` for angles, bins and spacing.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from topoloc.geometry import quantize_angle, straight_token, virtual_node_count
+from topoloc.errors import InputError
+from topoloc.geometry import point_along, quantize_angle, straight_token, virtual_node_count
 
 
 @dataclass(frozen=True)
@@ -76,11 +78,17 @@ def polyline_end_headings(coords: ArrayLike, lookahead_m: float) -> tuple[float,
     Using the geometry near the ends, not the chord, gives the direction in
     which a curved road leaves and enters its intersections.
     """
-    from topoloc.geometry import point_along
-
     pts = np.asarray(coords, dtype=float)
     length = float(np.hypot(*np.diff(pts, axis=0).T).sum())
     reach = min(lookahead_m, length / 2.0) if length > 0 else 0.0
     start = heading_deg(pts[0], point_along(pts, reach))
     end = heading_deg(point_along(pts, length - reach), pts[-1])
     return start, end
+
+
+def check_encoding(encoding: dict[str, Any]) -> int:
+    """The number of angle bins, checked (``encoding.angle_bins`` >= 4)."""
+    bins = encoding.get("angle_bins", 20)
+    if int(bins) != bins or bins < 4:
+        raise InputError("encoding.angle_bins", f"must be an integer >= 4, got {bins}")
+    return int(bins)

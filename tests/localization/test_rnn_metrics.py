@@ -8,8 +8,8 @@ import torch
 
 from topoloc.errors import InputError
 from topoloc.localization.evaluation import localized_step
-from topoloc.localization.rnn import edge_log_probs, load_model, window_plan
-from topoloc.trajectory.model import TrajectoryRNN
+from topoloc.localization.rnn import edge_log_probs, window_plan
+from topoloc.trajectory.model import TrajectoryRNN, load_model
 
 
 def test_window_plan_gives_every_step_the_oldest_window():

@@ -12,7 +12,7 @@ from localization_helpers import irregular_grid
 from topoloc.config import load
 from topoloc.errors import InputError
 from topoloc.localization.decode_trajectories import run
-from topoloc.odometry.poses import poses_from_planar, write_poses
+from topoloc.motion.poses import poses_from_planar, write_poses
 
 ROUTE = [0, 1, 6, 7, 8, 13, 14, 9, 4]
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from topoloc.motion.poses import poses_from_planar, read_poses
 from topoloc.odometry.evaluate import evaluate
-from topoloc.odometry.poses import poses_from_planar, read_poses
 
 
 def straight(n, step):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from topoloc.geometry import quantize_angle, straight_token
-from topoloc.odometry.segment_trajectory import douglas_peucker, segment_track
+from topoloc.segmentation import douglas_peucker, segment_track
 from topoloc.encoding import encode_segments
 
 

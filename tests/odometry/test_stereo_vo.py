@@ -7,7 +7,7 @@ import pytest
 
 from tests.conftest import make_config
 from topoloc.errors import InputError
-from topoloc.odometry.poses import planar_track, read_calib
+from topoloc.motion.poses import planar_track, read_calib
 from topoloc.odometry.stereo_vo import list_sequence, relative_motion, run_stereo_vo
 from topoloc.odometry.synthetic import BASELINE, CALIB, H, K, W, known_path, stereo_pair, write_sequence
 

@@ -13,9 +13,10 @@ import pytest
 from tests.conftest import make_config, write_osm
 from tests.render.conftest import render_conf, render_outputs
 from topoloc.errors import InputError
+from topoloc.motion.poses import read_calib, read_gps, read_poses, read_times
 from topoloc.odometry import extract_odometry
-from topoloc.odometry.poses import read_calib, read_gps, read_poses, read_times
 from topoloc.render import render_drive
+from topoloc.render.conditions import parse_drive, rendered_drive_names
 from topoloc.render.rig import StereoRig
 from topoloc.render.scene import read_buildings
 
@@ -89,13 +90,13 @@ def test_conditions_share_the_route(town, tmp_path):
 
 
 def test_drive_names_and_bad_inputs(town, tmp_path):
-    assert render_drive.rendered_drive_names(render_conf(routes=2, conditions=["clear_noon", "fog"])) == [
+    assert rendered_drive_names(render_conf(routes=2, conditions=["clear_noon", "fog"])) == [
         "ren00_clear_noon", "ren00_fog", "ren01_clear_noon", "ren01_fog"]
-    assert render_drive.parse_drive("ren12_sunset") == (12, "sunset")
+    assert parse_drive("ren12_sunset") == (12, "sunset")
     with pytest.raises(InputError, match=r"^render.conditions.1: unknown condition 'snow'"):
-        render_drive.rendered_drive_names(render_conf(conditions=["fog", "snow"]))
+        rendered_drive_names(render_conf(conditions=["fog", "snow"]))
     with pytest.raises(InputError, match=r"^drive: 'sim00' is not a rendered drive name"):
-        render_drive.parse_drive("sim00")
+        parse_drive("sim00")
     inputs = {"graph": str(town["graph"]), "osm": str(town["osm"])}
     cases = [({"width": 32}, r"^render.width: image size 32x188 is too small"),
              ({"sheet": {"conditions": ["dusk"], "frames": 1}}, r"^render.sheet.conditions.0: unknown condition 'dusk'"),

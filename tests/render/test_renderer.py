@@ -11,10 +11,10 @@ from tests.conftest import make_config
 from tests.render.conftest import EMPTY_BLOCK, STREETS_M
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
+from topoloc.motion.route import render_route
 from topoloc.render.conditions import CONDITIONS, get_condition
 from topoloc.render.renderer import Renderer
 from topoloc.render.rig import StereoRig
-from topoloc.render.route import render_route
 from topoloc.render.scene import Building, Scene, parse_height, read_buildings, scene_for_path
 from topoloc.render.textures import Road
 

@@ -154,7 +154,7 @@ except InputError as err:
     _fail(str(err))
 
 
-from topoloc.place.render_places import check_conditions
+from topoloc.render.conditions import check_conditions
 
 try:
     check_conditions(config["place"])

@@ -26,11 +26,11 @@ from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json
 from topoloc.localization.evaluation import DriveTruth, start_frames
 from topoloc.localization.localize import write_geojson
-from topoloc.localization.rnn import load_model
 from topoloc.localization.roadmap import Odometry, RoadMap
 from topoloc.localizer import ROAD_OBSERVATIONS, Localizer
-from topoloc.odometry.poses import read_poses
+from topoloc.motion.poses import read_poses
 from topoloc.registry import check_names, make, registry
+from topoloc.trajectory.model import load_model
 
 log = logging.getLogger(__name__)
 

@@ -1,4 +1,4 @@
-"""Running the trained trajectory RNN over a drive of any length, and loading it.
+"""Running the trained trajectory RNN over a drive of any length (loading it: :func:`topoloc.trajectory.model.load_model`).
 
 The RNN is trained on paths of ``dataset.path_nodes`` map nodes (tens of
 tokens); a real drive has hundreds. With ``window`` set, the drive is cut into
@@ -11,7 +11,6 @@ tokens of context. ``window: null`` runs one pass over the whole drive.
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -34,7 +33,7 @@ def window_plan(steps: int, window: int | None, stride: int | None) -> tuple[NDA
 
 def edge_log_probs(model: Any, tokens: NDArray[np.int64], window: int | None = None, stride: int | None = None) -> NDArray[np.float32]:
     """``(T, E)`` log-probabilities of the edge classes at every token of one drive."""
-    import torch
+    import torch  # torch only when a model runs: the localizer registry imports this module (and the workflow the registry)
 
     tokens = np.asarray(tokens, dtype=np.int64)
     steps = len(tokens)
@@ -67,7 +66,7 @@ class OnlineRNN:
     """
 
     def __init__(self, model: Any, window: int | None = None, stride: int | None = None) -> None:
-        import torch
+        import torch  # see edge_log_probs
 
         self.model, self.window = model.eval(), window
         self.stride = (window if stride is None else stride) if window is not None else None
@@ -104,37 +103,3 @@ class OnlineRNN:
             torch.set_num_threads(threads)
         self.t += 1
         return out
-
-
-def load_model(spec: str, tracking_uri: str | None = None) -> Any:
-    """The trajectory RNN from a ``.ckpt`` path, an MLflow model URI (``runs:/<id>/model``) or a bare run id.
-
-    An unknown file, run id or URI raises :class:`InputError` naming it.
-    """
-    path = Path(spec)
-    if path.suffix == ".ckpt" or path.exists():
-        if not path.is_file():
-            raise InputError(spec, "model checkpoint not found")
-        from topoloc.trajectory.model import TrajectoryRNN
-
-        try:
-            return TrajectoryRNN.load_from_checkpoint(str(path), map_location="cpu").eval()
-        except Exception as err:  # torch and Lightning raise many kinds
-            raise InputError(spec, f"not a trajectory RNN checkpoint ({type(err).__name__}: {str(err).splitlines()[0][:120]})") from err
-    uri = spec if "://" in spec or spec.startswith(("runs:/", "models:/")) else f"runs:/{spec}/model"
-    import mlflow
-
-    from topoloc.tracking import tracking_uri as default_uri
-
-    store = tracking_uri or default_uri()
-    if store.startswith("sqlite:///"):
-        db = Path(store[len("sqlite:///"):].split("?")[0])
-        if not db.is_file():
-            raise InputError(spec, f"no MLflow store at {db} to look up the run id in (set --tracking-uri or MLFLOW_TRACKING_URI)")
-    mlflow.set_tracking_uri(store)
-    try:
-        model = mlflow.pytorch.load_model(uri, map_location="cpu")
-    except Exception as err:  # MlflowException and OSError for unknown runs, models and artifacts
-        first = str(err).splitlines()[0][:160] if str(err) else type(err).__name__
-        raise InputError(spec, f"no trajectory model at {uri} in the MLflow store {store.split('?')[0]} ({first})") from err
-    return model.eval()

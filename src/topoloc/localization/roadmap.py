@@ -22,8 +22,8 @@ from numpy.typing import NDArray
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.connectivity import DirectedEdges, directed_edges
 from topoloc.localizer import Localizer, Track
-from topoloc.odometry.poses import planar_track, planar_yaw
-from topoloc.odometry.segment_trajectory import encode_track
+from topoloc.motion.poses import planar_track, planar_yaw
+from topoloc.segmentation import encode_track
 
 
 class RoadMap:

@@ -1,8 +1,8 @@
 """Simulated drives for validating localizers: realistic paths on a map, odometry with drawn noise.
 
-A drive follows a route on the road graph the way a car does (:func:`topoloc.render.route.smooth_path`:
+A drive follows a route on the road graph the way a car does (:func:`topoloc.motion.route.smooth_path`:
 in the right-hand lane, corners rounded), sampled about every metre. Its odometry integrates the true
-per-frame distance and heading change through the noise model of :mod:`topoloc.odometry.simulate`, with
+per-frame distance and heading change through the noise model of :mod:`topoloc.motion.noise`, with
 the parameters drawn per drive from the ranges of a :class:`NoiseLevel` (signs at random):
 
 * ``scale_error``: constant relative error of every distance;
@@ -23,8 +23,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from topoloc.graph.road_graph import RoadGraph
-from topoloc.odometry.simulate import random_route, sample_route
-from topoloc.render.route import DENSE_M, smooth_path
+from topoloc.motion.noise import NOISE_KEYS, OdometryNoise, integrate_odometry
+from topoloc.motion.route import DENSE_M, random_route, sample_route, smooth_path
 
 PATTERNS = ("random", "circuit", "stop_reverse")
 
@@ -42,7 +42,7 @@ class NoiseLevel:
     def draw(self, rng: np.random.Generator) -> dict[str, float]:
         """One drive's noise parameters (the scale error and the drift get a random sign)."""
         out = {}
-        for key in ("scale_error", "distance_noise", "heading_drift_deg_per_100m", "heading_noise_deg"):
+        for key in NOISE_KEYS:
             low, high = getattr(self, key)
             value = float(rng.uniform(low, high))
             out[key] = value * (rng.choice([-1.0, 1.0]) if key in ("scale_error", "heading_drift_deg_per_100m") else 1.0)
@@ -107,19 +107,6 @@ def _walk(graph: RoadGraph, length_m: float, rng: np.random.Generator, attempts:
     return best
 
 
-def _odometry(xy: NDArray[np.float64], yaw: NDArray[np.float64], noise: dict[str, float], sign: NDArray[np.float64],
-              rng: np.random.Generator) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Integrate the true signed distance and heading change per frame through the noise model."""
-    ds = np.hypot(*np.diff(xy, axis=0).T) * sign
-    dpsi = np.diff(np.unwrap(yaw))
-    ds_est = ds * (1.0 + noise["scale_error"]) + rng.standard_normal(len(ds)) * noise["distance_noise"] * np.abs(ds)
-    dpsi_est = (dpsi + np.radians(noise["heading_drift_deg_per_100m"]) / 100.0 * np.abs(ds)
-                + np.radians(noise["heading_noise_deg"]) * rng.standard_normal(len(ds)) * (np.abs(ds) > 0))
-    est_yaw = yaw[0] + np.concatenate([[0.0], np.cumsum(dpsi_est)])
-    moves = ds_est[:, None] * np.column_stack([np.cos(est_yaw[1:]), np.sin(est_yaw[1:])])
-    return np.concatenate([np.zeros((1, 2)), np.cumsum(moves, axis=0)]), est_yaw
-
-
 def simulate(graph: RoadGraph, length_m: float, level: NoiseLevel, rng: np.random.Generator, pattern: str = "random",
              stop_frames: int = 600, reverse_m: float = 15.0) -> SimulatedDrive:
     """One drive of about ``length_m`` on ``graph`` (see the module docstring)."""
@@ -137,8 +124,8 @@ def simulate(graph: RoadGraph, length_m: float, level: NoiseLevel, rng: np.rando
     if pattern == "stop_reverse" and len(xy) > 4 * reverse_m:
         xy, yaw, edge, sign = _stop_and_reverse(xy, yaw, edge, stop_frames, reverse_m)
     noise = level.draw(rng)
-    odo_xy, odo_yaw = _odometry(xy, yaw, noise, sign, rng)
-    return SimulatedDrive(xy, yaw, edge.astype(np.int64), odo_xy, odo_yaw, noise, pattern)
+    odometry = integrate_odometry(xy, yaw, OdometryNoise.from_dict(noise), rng, sign)
+    return SimulatedDrive(xy, yaw, edge.astype(np.int64), odometry.xy, odometry.yaw, noise, pattern)
 
 
 def _stop_and_reverse(xy: NDArray, yaw: NDArray, edge: NDArray, stop_frames: int, reverse_m: float):

@@ -6,7 +6,8 @@ Sources (``odometry.source``):
 * ``kitti_poses``: a KITTI poses file (ground truth or any SLAM output), optional timestamps;
 * ``kitti_stereo``: our stereo visual odometry on a KITTI sequence folder (:mod:`topoloc.odometry.stereo_vo`);
 * ``rendered``: the same stereo VO on a drive rendered from the map by the ``render_drive`` stage
-  (:mod:`topoloc.render.render_drive`): its sequence folder is the folder of ``inputs['calib']``, with
+  (:mod:`topoloc.render.render_drive`; drive names from :mod:`topoloc.render.conditions`): its sequence
+  folder is the folder of ``inputs['calib']``, with
   ground truth, timestamps and per-frame GPS beside it; ``inputs['truth']`` (``route.csv``) adds the true
   road edge of every frame.
 
@@ -28,12 +29,14 @@ import pandas as pd
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json
+from topoloc.motion.georef import Georeference, fit_rigid, from_origin, grid_heading_deg, to_map
+from topoloc.motion.poses import planar_track, planar_yaw, poses_from_planar, read_gps, read_poses, read_times, write_poses
 from topoloc.odometry.evaluate import align_rigid, evaluate
-from topoloc.odometry.georef import Georeference, fit_rigid, from_origin, grid_heading_deg, to_map
 from topoloc.odometry.mapmatch import match_track
 from topoloc.odometry.plot import plot_evaluation, plot_track
-from topoloc.odometry.poses import planar_track, planar_yaw, poses_from_planar, read_gps, read_poses, read_times, write_poses
 from topoloc.odometry.simulate import simulate_drive
+from topoloc.odometry.stereo_vo import run_stereo_vo
+from topoloc.render.conditions import rendered_drive_names
 
 log = logging.getLogger(__name__)
 
@@ -50,8 +53,6 @@ def drive_names(conf: dict[str, Any], render: dict[str, Any] | None = None) -> l
     if conf["source"] == "simulated":
         return simulated_drive_names(conf)
     if conf["source"] == "rendered":
-        from topoloc.render.render_drive import rendered_drive_names
-
         if render is None:
             raise InputError("render", "odometry.source rendered needs the render config section")
         return rendered_drive_names(render)
@@ -76,8 +77,6 @@ def _load_kitti(conf: dict[str, Any], drive: str, inputs: dict[str, str]) -> dic
         est = read_poses(inputs["poses"])
         flagged = np.zeros(len(est), dtype=bool)
     else:
-        from topoloc.odometry.stereo_vo import run_stereo_vo
-
         sequence = conf["drives"][drive]["sequence"] if conf["source"] == "kitti_stereo" else Path(inputs["calib"]).parent
         est, flagged, extra = run_stereo_vo(sequence, conf["stereo"])
     gt = read_poses(inputs["ground_truth"]) if "ground_truth" in inputs else None

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from topoloc.errors import InputError
-from topoloc.odometry.poses import read_calib
+from topoloc.motion.poses import read_calib
 
 log = logging.getLogger(__name__)
 

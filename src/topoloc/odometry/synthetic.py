@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from topoloc.odometry.poses import poses_from_planar
+from topoloc.motion.poses import poses_from_planar
 
 __all__ = ["BASELINE", "CALIB", "CX", "CY", "F", "H", "K", "W", "known_path", "render", "stereo_pair", "texture",
            "write_sequence"]

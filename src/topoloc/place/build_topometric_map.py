@@ -12,10 +12,13 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import torch
 
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json
 from topoloc.place.images import PlaceSet
+from topoloc.place.network import load_model
+from topoloc.place.plot import map_figure
 from topoloc.place.topometric_map import COMMANDS, build_map
 
 log = logging.getLogger(__name__)
@@ -23,11 +26,6 @@ log = logging.getLogger(__name__)
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
     """Build the map from ``inputs`` model / teach / graph; write ``map``, ``vertices``, ``stats`` and ``figure``."""
-    import torch
-
-    from topoloc.place.plot import map_figure
-    from topoloc.place.train_retrieval import load_model
-
     torch.set_num_threads(int(conf["threads"]))
     model = load_model(inputs["model"])
     teach = PlaceSet.load(inputs["teach"])

@@ -3,7 +3,7 @@
 Three sets are rendered (stage ``render_places``), all in the street scenes of :mod:`topoloc.render`:
 
 * **route**: the evaluation route is render route ``place.route`` (the path of drive ``ren<RR>_*``,
-  :func:`topoloc.render.render_drive.drive_path`). The *teach* drive is that path, one image per frame,
+  :func:`topoloc.render.drives.drive_path`). The *teach* drive is that path, one image per frame,
   under ``place.teach_condition``. The *repeat* drive follows the same route with other frames: every
   ``repeat.frame_spacing_m`` from ``repeat.phase_m``, weaving ``repeat.lateral_m`` about the teach path
   (period ``repeat.weave_period_m``) with a smooth heading jitter of ``repeat.yaw_deg``; it is rendered
@@ -34,11 +34,11 @@ from tqdm import tqdm
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
+from topoloc.motion.route import CameraPath, render_route
 from topoloc.render.conditions import get_condition
-from topoloc.render.render_drive import drive_path, drive_scene
+from topoloc.render.drives import drive_path, drive_scene
 from topoloc.render.renderer import Renderer
 from topoloc.render.rig import KITTI_BASELINE_M, StereoRig
-from topoloc.render.route import CameraPath, render_route
 
 
 @dataclass

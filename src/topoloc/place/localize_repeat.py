@@ -47,10 +47,12 @@ from topoloc.place.localize import (
     correlation_descriptors,
     drive_frames,
 )
+from topoloc.place.network import load_model
 from topoloc.place.odometry import noisy_odometry
-from topoloc.place.render_places import check_conditions
+from topoloc.place.plot import bars_figure, errors_figure
 from topoloc.place.topometric_map import TopometricMap
 from topoloc.registry import check_names, make
+from topoloc.render.conditions import check_conditions
 
 log = logging.getLogger(__name__)
 
@@ -118,9 +120,6 @@ def tables_markdown(summary: pd.DataFrame, names: dict[str, list[str]], facts: d
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
     """Localize every repeat condition of ``inputs['repeat']`` on ``inputs['map']`` with ``inputs['model']``."""
-    from topoloc.place.plot import bars_figure, errors_figure
-    from topoloc.place.train_retrieval import load_model
-
     torch.set_num_threads(int(conf["threads"]))
     names = check_conditions(conf)
     model = load_model(inputs["model"])

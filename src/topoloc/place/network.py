@@ -22,6 +22,7 @@ embeds images once and :meth:`SiameseNet.same_place` scores embeddings against e
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import lightning as L
@@ -30,6 +31,8 @@ import torch
 from numpy.typing import NDArray
 from torch import nn
 from torch.nn import functional as F
+
+from topoloc.errors import InputError
 
 
 class BasicBlock(nn.Module):
@@ -265,3 +268,11 @@ class SiameseNet(L.LightningModule):
 
     def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
         self.condition_names = list(checkpoint.get("condition_names", []))
+
+def load_model(path: str | Path) -> SiameseNet:
+    """The trained network of a ``train_retrieval`` checkpoint, on the CPU, in eval mode."""
+    try:
+        model = SiameseNet.load_from_checkpoint(str(path), map_location="cpu")
+    except (OSError, RuntimeError, KeyError) as err:
+        raise InputError(path, f"not a retrieval model checkpoint ({err})") from err
+    return model.eval()

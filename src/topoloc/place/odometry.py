@@ -1,13 +1,14 @@
 """Path integration of noisy odometry (the paper integrates the simulator's velocity with Gaussian noise).
 
 From the ground-truth poses of a drive, the per-frame distance ``ds`` and heading change ``dpsi`` are
-corrupted as
+corrupted by the noise model of :mod:`topoloc.motion.noise`,
 
 * ``ds' = ds (1 + b) + N(0, (distance_noise ds)^2)``, with a scale error ``b ~ N(0, scale_error_std^2)``
   drawn once per drive (teach and repeat drives get independent errors, so they drift apart);
 * ``dpsi' = dpsi + heading_drift_deg_per_100m ds / 100 + N(0, heading_noise_deg^2)``,
 
 and integrated from the true first pose (the step to frame ``k`` is taken along the heading of frame ``k``).
+``place.odometry_noise`` names the scale error ``scale_error_std``: it is the spread of the per-drive draw.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from topoloc.errors import InputError
+from topoloc.motion.noise import OdometryNoise, integrate_odometry
 
 NOISE_KEYS = ("scale_error_std", "distance_noise", "heading_drift_deg_per_100m", "heading_noise_deg")
 
@@ -46,14 +48,9 @@ def noisy_odometry(xy: NDArray[np.float64], yaw: NDArray[np.float64], noise: dic
         raise InputError(f"{where}.{missing[0]}", "missing odometry noise setting")
     if any(float(noise[k]) < 0 for k in ("scale_error_std", "distance_noise", "heading_noise_deg")):
         raise InputError(where, "noise standard deviations must be non-negative")
-    xy, yaw = np.asarray(xy, float), np.unwrap(np.asarray(yaw, float))
-    ds = np.hypot(*np.diff(xy, axis=0).T)
-    dpsi = np.diff(yaw)
+    xy = np.asarray(xy, float)
     scale = float(rng.normal(0.0, float(noise["scale_error_std"])))
-    ds_est = ds * (1.0 + scale) + rng.standard_normal(len(ds)) * float(noise["distance_noise"]) * ds
-    dpsi_est = (dpsi + np.radians(float(noise["heading_drift_deg_per_100m"])) / 100.0 * ds
-                + np.radians(float(noise["heading_noise_deg"])) * rng.standard_normal(len(ds)))
-    est_yaw = yaw[0] + np.concatenate([[0.0], np.cumsum(dpsi_est)])
-    moves = ds_est[:, None] * np.column_stack([np.cos(est_yaw[1:]), np.sin(est_yaw[1:])])
-    est_xy = xy[0] + np.concatenate([np.zeros((1, 2)), np.cumsum(moves, axis=0)])
-    return Odometry(np.concatenate([[0.0], ds_est]), est_xy, est_yaw, scale)
+    model = OdometryNoise(scale, float(noise["distance_noise"]), float(noise["heading_drift_deg_per_100m"]),
+                          float(noise["heading_noise_deg"]))
+    track = integrate_odometry(xy, yaw, model, rng)
+    return Odometry(track.ds, xy[0] + track.xy, track.yaw, scale)

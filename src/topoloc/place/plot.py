@@ -13,6 +13,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from topoloc.io import atomic_path  # noqa: E402
+from topoloc.place.topometric_map import COMMANDS  # noqa: E402
 
 COMMAND_COLORS = {"follow": "0.7", "left": "tab:blue", "right": "tab:red", "straight": "tab:green"}
 METHOD_COLORS = {"siamese network": "tab:blue", "siamese network + filter": "navy", "raw correlation": "tab:orange",
@@ -52,8 +53,6 @@ def training_figure(history: pd.DataFrame, metrics: dict[str, float], path: str 
 
 def map_figure(topo: Any, crossings: list[Any], path: str | Path) -> None:
     """Vertices at their true and path-integrated positions, coloured by navigation command."""
-    from topoloc.place.topometric_map import COMMANDS
-
     fig, ax = plt.subplots(figsize=(7, 7))
     ax.plot(topo.gt_xy[:, 0], topo.gt_xy[:, 1], "-", color="k", lw=0.8, label="teach drive (ground truth)")
     ax.plot(topo.xy[:, 0], topo.xy[:, 1], "--", color="0.5", lw=0.8, label="vertex positions (path integration)")

@@ -22,40 +22,13 @@ from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import write_json
 from topoloc.place.images import (PlaceSet, make_rig, polyline_distance, render_conditions, render_training_set,
                                   repeat_poses, route_path)
-from topoloc.render.conditions import CONDITIONS, get_condition
+from topoloc.render.conditions import CONDITIONS, check_conditions
+from topoloc.render.drives import drive_scene, route_seed, sample_frames
 from topoloc.render.plot import contact_sheet
-from topoloc.render.render_drive import drive_scene, route_seed, sample_frames
 
 log = logging.getLogger(__name__)
 
 SPLITS = ("train", "teach", "repeat")
-
-
-def check_conditions(place: dict[str, Any]) -> dict[str, list[str]]:
-    """Teach, repeat, training and held-out condition names of a ``place`` config slice (keys it lacks: empty).
-
-    InputError naming the key when a name is unknown, the teach condition is among the repeat conditions,
-    fewer than two conditions are trained on, or none is held out.
-    """
-    teach = [str(place["teach_condition"])] if "teach_condition" in place else []
-    for name in teach:
-        get_condition(name, "place.teach_condition")
-    repeat = [str(c) for c in place.get("repeat_conditions", [])]
-    train = [str(c) for c in place.get("train", {}).get("conditions", [])]
-    for key, names in (("place.repeat_conditions", repeat), ("place.train.conditions", train)):
-        for i, name in enumerate(names):
-            get_condition(name, f"{key}.{i}")
-    if "repeat_conditions" in place and not repeat:
-        raise InputError("place.repeat_conditions", "at least one repeat condition is needed")
-    if set(teach) & set(repeat):
-        raise InputError("place.repeat_conditions", f"must not contain the teach condition {teach[0]!r}")
-    held_out = [c for c in CONDITIONS if c not in train]
-    if "conditions" in place.get("train", {}):
-        if len(train) < 2:
-            raise InputError("place.train.conditions", "positives are drawn across conditions: give at least two")
-        if not held_out:
-            raise InputError("place.train.conditions", "keep at least one condition out of training (it is reported separately)")
-    return {"teach": teach, "repeat": repeat, "train": train, "held_out": held_out}
 
 
 def _sheet(places: PlaceSet, path: str, title: str) -> None:

@@ -33,6 +33,7 @@ from topoloc.geometry import point_along, turning_angle
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
 from topoloc.place.images import PlaceSet
+from topoloc.place.localize import correlation_descriptors
 from topoloc.place.odometry import noisy_odometry
 
 COMMANDS = ("follow", "left", "right", "straight")
@@ -137,8 +138,6 @@ def vertex_commands(xy: NDArray[np.float64], intersections: list[Intersection], 
 
 def build_map(teach: PlaceSet, graph: RoadGraph, model: Any, conf: dict[str, Any]) -> tuple[TopometricMap, list[Intersection], dict[str, float]]:
     """The map of the teach set's single condition; ``conf`` is the ``place`` config slice."""
-    from topoloc.place.localize import correlation_descriptors
-
     if len(teach.conditions) != 1:
         raise InputError("place.teach_condition", f"the teach set must hold one condition, got {teach.conditions}")
     if np.any(teach.edge < 0):

@@ -36,7 +36,8 @@ from topoloc.io import atomic_path, write_json
 from topoloc.place.images import PlaceSet
 from topoloc.place.network import SiameseNet
 from topoloc.place.pair_data import EpochSetter, PairData
-from topoloc.place.render_places import check_conditions
+from topoloc.place.plot import training_figure
+from topoloc.render.conditions import check_conditions
 from topoloc.training import FitSettings, LoggedModel
 from topoloc.training import fit as fit_module
 
@@ -67,15 +68,6 @@ def build_model(conf: dict[str, Any], in_channels: int, names: list[str]) -> Sia
             raise InputError("place.network.weights", f"{path}: does not fit the configured network ({str(err)[:200]})") from err
         log.info("loaded weights %s (missing %d, unexpected %d keys)", path, len(missing), len(unexpected))
     return model
-
-
-def load_model(path: str | Path) -> SiameseNet:
-    """The trained network of a ``train_retrieval`` checkpoint, on the CPU, in eval mode."""
-    try:
-        model = SiameseNet.load_from_checkpoint(str(path), map_location="cpu")
-    except (OSError, RuntimeError, KeyError) as err:
-        raise InputError(path, f"not a retrieval model checkpoint ({err})") from err
-    return model.eval()
 
 
 @torch.no_grad()
@@ -132,7 +124,6 @@ def signature_example(places: PlaceSet) -> np.ndarray:
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
     """Train on ``inputs['places']``; write ``model``, ``history``, ``metrics`` and ``figure``."""
-    from topoloc.place.plot import training_figure
 
     places = PlaceSet.load(inputs["places"])
     _, history, metrics = fit(conf, places, outputs["model"], log_model=conf["train"]["log_model"])

@@ -20,11 +20,14 @@ A :class:`Condition` is a documented set of parameters that the renderer applies
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass
+from typing import Any
 
 from topoloc.errors import InputError
 
 BGR = tuple[float, float, float]
+_DRIVE = re.compile(r"^ren(\d+)_([a-z][a-z0-9_]*)$")
 
 
 @dataclass(frozen=True)
@@ -95,3 +98,46 @@ def get_condition(name: str, where: str = "render.conditions") -> Condition:
     if name not in CONDITIONS:
         raise InputError(where, f"unknown condition {name!r}; choose from {sorted(CONDITIONS)}")
     return CONDITIONS[name]
+
+
+def check_conditions(place: dict[str, Any]) -> dict[str, list[str]]:
+    """Teach, repeat, training and held-out condition names of a ``place`` config slice (keys it lacks: empty).
+
+    InputError naming the key when a name is unknown, the teach condition is among the repeat conditions,
+    fewer than two conditions are trained on, or none is held out.
+    """
+    teach = [str(place["teach_condition"])] if "teach_condition" in place else []
+    for name in teach:
+        get_condition(name, "place.teach_condition")
+    repeat = [str(c) for c in place.get("repeat_conditions", [])]
+    train = [str(c) for c in place.get("train", {}).get("conditions", [])]
+    for key, names in (("place.repeat_conditions", repeat), ("place.train.conditions", train)):
+        for i, name in enumerate(names):
+            get_condition(name, f"{key}.{i}")
+    if "repeat_conditions" in place and not repeat:
+        raise InputError("place.repeat_conditions", "at least one repeat condition is needed")
+    if set(teach) & set(repeat):
+        raise InputError("place.repeat_conditions", f"must not contain the teach condition {teach[0]!r}")
+    held_out = [c for c in CONDITIONS if c not in train]
+    if "conditions" in place.get("train", {}):
+        if len(train) < 2:
+            raise InputError("place.train.conditions", "positives are drawn across conditions: give at least two")
+        if not held_out:
+            raise InputError("place.train.conditions", "keep at least one condition out of training (it is reported separately)")
+    return {"teach": teach, "repeat": repeat, "train": train, "held_out": held_out}
+
+
+def rendered_drive_names(conf: dict[str, Any]) -> list[str]:
+    """Drive wildcards of the rendered source: ``ren00_clear_noon``, ... (every route under every condition)."""
+    for i, name in enumerate(conf["conditions"]):
+        get_condition(name, f"render.conditions.{i}")
+    return [f"ren{r:02d}_{name}" for r in range(int(conf["routes"])) for name in conf["conditions"]]
+
+
+def parse_drive(drive: str) -> tuple[int, str]:
+    """Route index and condition name of a rendered drive name."""
+    match = _DRIVE.match(drive)
+    if not match:
+        raise InputError("drive", f"{drive!r} is not a rendered drive name (ren<route>_<condition>)")
+    get_condition(match.group(2), "drive")
+    return int(match.group(1)), match.group(2)

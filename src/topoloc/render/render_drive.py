@@ -1,7 +1,7 @@
 """Stage ``render_drive``: a rendered stereo drive on the region's map, written as a KITTI sequence.
 
 Drive ``ren<RR>_<condition>`` is route ``RR`` (a smooth random route on the road graph, seeded by
-``render.seed`` and ``RR``, see :mod:`topoloc.render.route`) seen under ``condition``: all conditions of
+``render.seed`` and ``RR``, see :mod:`topoloc.motion.route`) seen under ``condition``: all conditions of
 one route share the path, the buildings and their textures, so the same places look different only by
 their appearance. Outputs, beside each other in ``results/{region}/render/{drive}/``:
 
@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import logging
 import os
-import re
 import shutil
 import tempfile
 import time
@@ -30,79 +29,28 @@ import cv2
 import numpy as np
 import pandas as pd
 import pyproj
-from numpy.typing import NDArray
 from tqdm import tqdm
 
-from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json, write_text
-from topoloc.odometry.georef import Georeference
-from topoloc.odometry.poses import poses_from_planar, write_poses
-from topoloc.render.conditions import get_condition
+from topoloc.motion.poses import write_poses
+from topoloc.motion.route import CameraPath
+from topoloc.render.conditions import get_condition, parse_drive
+from topoloc.render.drives import (
+    drive_path,
+    drive_scene,
+    local_poses,
+    make_rig,
+    route_seed,
+    sample_frames,
+)
 from topoloc.render.plot import contact_sheet
 from topoloc.render.renderer import Renderer
-from topoloc.render.rig import StereoRig
-from topoloc.render.route import CameraPath, render_route
-from topoloc.render.scene import Scene, scene_for_path
 
 log = logging.getLogger(__name__)
 
-_DRIVE = re.compile(r"^ren(\d+)_([a-z][a-z0-9_]*)$")
 # Fast PNG: the sensor noise leaves little for LZ77 to find; Huffman coding alone is faster and smaller.
 PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
-
-
-def rendered_drive_names(conf: dict[str, Any]) -> list[str]:
-    """Drive wildcards of the rendered source: ``ren00_clear_noon``, ... (every route under every condition)."""
-    for i, name in enumerate(conf["conditions"]):
-        get_condition(name, f"render.conditions.{i}")
-    return [f"ren{r:02d}_{name}" for r in range(int(conf["routes"])) for name in conf["conditions"]]
-
-
-def parse_drive(drive: str) -> tuple[int, str]:
-    """Route index and condition name of a rendered drive name."""
-    match = _DRIVE.match(drive)
-    if not match:
-        raise InputError("drive", f"{drive!r} is not a rendered drive name (ren<route>_<condition>)")
-    get_condition(match.group(2), "drive")
-    return int(match.group(1)), match.group(2)
-
-
-def make_rig(conf: dict[str, Any]) -> StereoRig:
-    """The stereo rig of a ``render`` config slice."""
-    return StereoRig.kitti(int(conf["width"]), int(conf["height"]), float(conf["baseline_m"]), float(conf["camera_height_m"]))
-
-
-def drive_path(graph: RoadGraph, conf: dict[str, Any], route: int) -> CameraPath:
-    """The camera path of route ``route`` (seeded by ``render.seed`` and the route index)."""
-    if float(conf["length_m"]) < 2 * float(conf["frame_spacing_m"]):
-        raise InputError("render.length_m", f"{conf['length_m']} m is shorter than two frames")
-    rng = np.random.default_rng([int(conf["seed"]), route])
-    return render_route(graph, float(conf["length_m"]), float(conf["frame_spacing_m"]), rng,
-                        float(conf["smoothing_m"]), float(conf["lane_offset_m"]), float(conf["max_turn_deg"]))
-
-
-def drive_scene(osm: str | None, graph: RoadGraph, path: CameraPath, conf: dict[str, Any]) -> Scene:
-    """The scene around a camera path, from the ``render.buildings`` settings."""
-    scene_conf = {**conf["buildings"], "view_distance_m": float(conf["view_distance_m"])}
-    return scene_for_path(osm, graph, path.xy, scene_conf, int(conf["seed"]))
-
-
-def route_seed(conf: dict[str, Any], route: int) -> int:
-    """Seed of the per-image noise and rain of a route."""
-    return int(np.random.SeedSequence([int(conf["seed"]), route]).generate_state(1)[0])
-
-
-def local_poses(xy: NDArray[np.float64], yaw: NDArray[np.float64]) -> tuple[NDArray[np.float64], Georeference]:
-    """KITTI poses with frame 0 at the origin looking along +z, and the georeference back to the map."""
-    geo = Georeference(float(yaw[0] - np.pi / 2.0), np.asarray(xy[0], float).copy())
-    local = (xy - geo.t) @ geo.rotation
-    return poses_from_planar(local, yaw - geo.theta), geo
-
-
-def sample_frames(n: int, count: int) -> list[int]:
-    """``count`` frame indices spread evenly inside ``0..n-1``."""
-    return sorted({int(round(v)) for v in np.linspace(0, n - 1, count + 2)[1:-1]}) or [0]
 
 
 def _write_images(renderer: Renderer, path: CameraPath, left_dir: Path, right_dir: Path) -> dict[str, float]:

@@ -25,6 +25,7 @@ import pyarrow.parquet as pq
 
 from topoloc.encoding import encode_segments, polyline_end_headings
 from topoloc.graph.road_graph import RoadGraph
+from topoloc.segmentation import segment_track, token_places
 from topoloc.trajectory.paths import Path as GraphPath
 
 SCHEMA = pa.schema(
@@ -54,7 +55,7 @@ class PathEncoder:
     With ``segmentation`` (the config slice: ``tolerance_m``, ``corner_skip_m``,
     ``turn_label_offset_m``), a path is encoded like a test drive instead: its
     polyline goes through the Douglas-Peucker segmentation of
-    :mod:`topoloc.odometry.segment_trajectory`, so a straight-through
+    :mod:`topoloc.segmentation`, so a straight-through
     intersection yields no token and a bend of a road can, as on real
     odometry; labels are the edge at each token's place along the path.
     """
@@ -94,8 +95,6 @@ class PathEncoder:
 
 
     def _encode_segmented(self, path: GraphPath, rng: np.random.Generator | None, noise: Noise) -> tuple[np.ndarray, np.ndarray]:
-        from topoloc.odometry.segment_trajectory import segment_track, token_places
-
         edges = np.asarray(path.edges)
         pieces = [self.graph.edge_coords(int(edges[0]), path.nodes[0])]
         pieces += [self.graph.edge_coords(int(e), n)[1:] for e, n in zip(edges[1:], path.nodes[1:-1])]

@@ -16,6 +16,7 @@ correctness, and the per-step cross-entropy ignores the padded steps.
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
 import lightning as L
@@ -24,6 +25,8 @@ import torch
 from torch import nn
 from torch.utils.data import DataLoader, Dataset, Sampler
 
+from topoloc.errors import InputError
+from topoloc.tracking import tracking_uri as default_uri
 from topoloc.trajectory.dataset import MAX_OFFSET, load_sequences, load_state_targets
 
 IGNORE = -100
@@ -226,3 +229,33 @@ def predict(model: TrajectoryRNN, tokens: Sequence[np.ndarray], batch_size: int 
             preds[int(i)] = arg[row, : len(tokens[i])]
     out = [preds[i] for i in range(len(tokens))]
     return out
+
+
+def load_model(spec: str, tracking_uri: str | None = None) -> Any:
+    """The trajectory RNN from a ``.ckpt`` path, an MLflow model URI (``runs:/<id>/model``) or a bare run id.
+
+    An unknown file, run id or URI raises :class:`InputError` naming it.
+    """
+    path = Path(spec)
+    if path.suffix == ".ckpt" or path.exists():
+        if not path.is_file():
+            raise InputError(spec, "model checkpoint not found")
+        try:
+            return TrajectoryRNN.load_from_checkpoint(str(path), map_location="cpu").eval()
+        except Exception as err:  # torch and Lightning raise many kinds
+            raise InputError(spec, f"not a trajectory RNN checkpoint ({type(err).__name__}: {str(err).splitlines()[0][:120]})") from err
+    uri = spec if "://" in spec or spec.startswith(("runs:/", "models:/")) else f"runs:/{spec}/model"
+    import mlflow  # only for run ids and model URIs: MLflow is slow to import
+
+    store = tracking_uri or default_uri()
+    if store.startswith("sqlite:///"):
+        db = Path(store[len("sqlite:///"):].split("?")[0])
+        if not db.is_file():
+            raise InputError(spec, f"no MLflow store at {db} to look up the run id in (set --tracking-uri or MLFLOW_TRACKING_URI)")
+    mlflow.set_tracking_uri(store)
+    try:
+        model = mlflow.pytorch.load_model(uri, map_location="cpu")
+    except Exception as err:  # MlflowException and OSError for unknown runs, models and artifacts
+        first = str(err).splitlines()[0][:160] if str(err) else type(err).__name__
+        raise InputError(spec, f"no trajectory model at {uri} in the MLflow store {store.split('?')[0]} ({first})") from err
+    return model.eval()

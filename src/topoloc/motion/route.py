@@ -1,7 +1,7 @@
-"""Routes for rendered drives: random walks on the road graph, smoothed into drivable camera paths.
+"""Routes on the road graph: random walks, sampled along the roads, smoothed into drivable camera paths.
 
-The walk is :func:`topoloc.odometry.simulate.random_route` (one-way roads respected, no U-turn except at
-dead ends), sampled with :func:`~topoloc.odometry.simulate.sample_route` every 0.25 m. A walk that turns
+The walk is :func:`random_route` (one-way roads respected, no U-turn except at dead ends), sampled with
+:func:`sample_route` every 0.25 m. A walk that turns
 back at a dead end is cut there (a camera cannot turn 180 degrees between two frames); of up to
 ``attempts`` walks the first at least ``length_m`` long is taken, else the longest. The polyline is then
 shifted ``lane_offset_m`` to the right of the road centre line (right-hand traffic), smoothed with a
@@ -21,9 +21,61 @@ from scipy.ndimage import gaussian_filter1d
 
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
-from topoloc.odometry.simulate import random_route, sample_route
 
 DENSE_M = 0.25
+
+
+def random_route(graph: RoadGraph, length_m: float, rng: np.random.Generator, max_steps: int = 10000) -> tuple[list[int], list[int]]:
+    """A random walk of edges (and the node each is entered from) of total length at least ``length_m``."""
+    edges = graph.edges
+    g = graph.graph
+    nodes = [n for n in graph.nodes.index if graph.nodes.degree.at[n] >= 2] or list(graph.nodes.index)
+    node = int(rng.choice(nodes))
+    route: list[int] = []
+    froms: list[int] = []
+    total = 0.0
+    for _ in range(max_steps):
+        options = []
+        for _, other, key in g.edges(node, keys=True):
+            ow = edges.oneway.iat[key]
+            if ow == 1 and edges.u.iat[key] != node or ow == -1 and edges.v.iat[key] != node:
+                continue
+            if route and key == route[-1] and g.degree(node) > 1:
+                continue
+            options.append(key)
+        if not options:
+            options = [route[-1]] if route else []
+        if not options:
+            break
+        key = int(rng.choice(options))
+        route.append(key)
+        froms.append(node)
+        total += float(edges.length_m.iat[key])
+        node = graph.other_end(key, node)
+        if total >= length_m:
+            break
+    return route, froms
+
+
+def sample_route(graph: RoadGraph, route: list[int], froms: list[int], spacing_m: float) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Points every ``spacing_m`` along the route, and the edge of each."""
+    pieces = [graph.edge_coords(e, f) for e, f in zip(route, froms)]
+    coords = [pieces[0][:1]]
+    labels = [np.array([route[0]])]
+    for e, piece in zip(route, pieces):
+        coords.append(piece[1:])
+        labels.append(np.full(len(piece) - 1, e))
+    pts = np.concatenate(coords)
+    lab = np.concatenate(labels)
+    seg = np.hypot(*np.diff(pts, axis=0).T)
+    keep = np.concatenate([[True], seg > 1e-6])
+    pts, lab = pts[keep], lab[keep]
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    s = np.arange(0.0, cum[-1], spacing_m)
+    x = np.interp(s, cum, pts[:, 0])
+    y = np.interp(s, cum, pts[:, 1])
+    idx = np.clip(np.searchsorted(cum, s, side="right"), 1, len(cum) - 1)
+    return np.column_stack([x, y]), lab[idx].astype(np.int64)
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from topoloc.errors import InputError
-from topoloc.odometry.poses import (planar_track, planar_yaw, poses_from_planar, read_calib, read_gps, read_poses,
+from topoloc.motion.poses import (planar_track, planar_yaw, poses_from_planar, read_calib, read_gps, read_poses,
                                     read_times, write_poses)
 
 IDENTITY = "1 0 0 0 0 1 0 0 0 0 1 0\n"

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from topoloc.odometry.georef import fit_rigid, from_origin, grid_heading_deg, to_map
-from topoloc.odometry.poses import planar_track, planar_yaw, read_gps, read_poses
+from topoloc.motion.georef import fit_rigid, from_origin, grid_heading_deg, to_map
+from topoloc.motion.poses import planar_track, planar_yaw, read_gps, read_poses
 
 
 def test_origin_puts_forward_along_heading():
