@@ -15,12 +15,10 @@ one convention; see :mod:`topoloc.geometry` for angles, bins and spacing.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from topoloc.errors import InputError
 from topoloc.geometry import point_along, quantize_angle, straight_token, virtual_node_count
 
 
@@ -84,11 +82,3 @@ def polyline_end_headings(coords: ArrayLike, lookahead_m: float) -> tuple[float,
     start = heading_deg(pts[0], point_along(pts, reach))
     end = heading_deg(point_along(pts, length - reach), pts[-1])
     return start, end
-
-
-def check_encoding(encoding: dict[str, Any]) -> int:
-    """The number of angle bins, checked (``encoding.angle_bins`` >= 4)."""
-    bins = encoding.get("angle_bins", 20)
-    if int(bins) != bins or bins < 4:
-        raise InputError("encoding.angle_bins", f"must be an integer >= 4, got {bins}")
-    return int(bins)

@@ -12,7 +12,6 @@ from typing import Any
 
 import numpy as np
 
-from topoloc.encoding import check_encoding
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json, write_text
