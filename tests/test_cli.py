@@ -116,7 +116,7 @@ def test_metric_filter_needs_no_model_and_gives_a_position(small_map, capsys):
     assert "metric filter" in out and "sure since" in out and f"road {route_edges[-1]}" in out
 
 
-@pytest.mark.parametrize("case", ["unknown_run", "no_store", "missing_ckpt", "empty_poses", "standstill", "other_map", "other_map_no_georef",
+@pytest.mark.parametrize("case", ["unknown_run", "no_store", "missing_ckpt", "no_model", "empty_poses", "standstill", "other_map", "other_map_no_georef",
                                   "bad_decoder", "bad_k"])
 def test_bad_input_is_one_line(small_map, capsys, case, tmp_path):
     tmp, _ = small_map
@@ -140,6 +140,10 @@ def test_bad_input_is_one_line(small_map, capsys, case, tmp_path):
     elif case == "missing_ckpt":
         args["--model"] = tmp_path / "nothing.ckpt"
         expected = f"topoloc: {tmp_path / 'nothing.ckpt'}: model checkpoint not found"
+    elif case == "no_model":
+        del args["--model"]
+        extra = ["--decoder", "strategy1"]
+        expected = "topoloc: --model: strategy1 needs a trained model"
     elif case == "empty_poses":
         (tmp_path / "empty.txt").write_text("")
         args["--poses"] = tmp_path / "empty.txt"

@@ -88,9 +88,10 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     if track_xy is not None:
         check_on_map(graph, track_xy, float(conf["localization"]["max_offmap_m"]), args.poses, args.graph)
     known = registry(ROAD_OBSERVATIONS)
-    model = load_model(args.model, args.tracking_uri) if any(known[n].requires_model for n in names) else None
-    if model is None and any(known[n].requires_model for n in names):
-        raise InputError("--model", f"{', '.join(n for n in names if known[n].requires_model)} needs a trained model")
+    needs_model = [n for n in names if known[n].requires_model]
+    if needs_model and args.model is None:
+        raise InputError("--model", f"{', '.join(needs_model)} needs a trained model (a checkpoint, runs:/ID/model or a run id)")
+    model = load_model(args.model, args.tracking_uri) if needs_model else None
     road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], conf["localization"]["decode"]["max_skip_m"], model)
     to_lonlat = pyproj.Transformer.from_crs(graph.crs, "EPSG:4326", always_xy=True)
     tables, seconds = [], {}
@@ -105,7 +106,7 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
         localizer.reset(road, conf)
         track = localizer.run(observations.items)
         seconds[name] = time.process_time() - began
-        if name == "hmm" and geo is None:
+        if geo is None and hasattr(localizer, "explained"):  # without a georeference: does the map explain the turns?
             check_explained(*localizer.explained(observations.items), float(conf["localization"]["min_explained_turns"]), args.poses)
         lon, lat = to_lonlat.transform(track.xy[:, 0], track.xy[:, 1])
         tables.append(pd.DataFrame({"localizer": name, "step": np.arange(len(track)), "frame": observations.frame,

@@ -4,8 +4,16 @@ import numpy as np
 import pytest
 
 from topoloc.errors import InputError
-from topoloc.motion.poses import (planar_track, planar_yaw, poses_from_planar, read_calib, read_gps, read_poses,
-                                    read_times, write_poses)
+from topoloc.motion.poses import (
+    planar_track,
+    planar_yaw,
+    poses_from_planar,
+    read_calib,
+    read_gps,
+    read_poses,
+    read_times,
+    write_poses,
+)
 
 IDENTITY = "1 0 0 0 0 1 0 0 0 0 1 0\n"
 

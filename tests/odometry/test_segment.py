@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from topoloc.encoding import encode_segments
 from topoloc.geometry import quantize_angle, straight_token
 from topoloc.segmentation import douglas_peucker, segment_track
-from topoloc.encoding import encode_segments
 
 
 def l_track(step=1.0):

@@ -9,7 +9,16 @@ from tests.conftest import make_config
 from topoloc.errors import InputError
 from topoloc.motion.poses import planar_track, read_calib
 from topoloc.odometry.stereo_vo import list_sequence, relative_motion, run_stereo_vo
-from topoloc.odometry.synthetic import BASELINE, CALIB, H, K, W, known_path, stereo_pair, write_sequence
+from topoloc.odometry.synthetic import (
+    BASELINE,
+    CALIB,
+    H,
+    K,
+    W,
+    known_path,
+    stereo_pair,
+    write_sequence,
+)
 
 STEREO = make_config()["odometry"]["stereo"]
 

@@ -7,14 +7,21 @@ import hashlib
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from trajectory_helpers import make_graph, random_graph
 
 from tests.conftest import make_config
 from topoloc.errors import InputError
 from topoloc.geometry import quantize_angle
-from topoloc.trajectory.dataset import MAX_OFFSET, Noise, PathEncoder, load_sequences, load_state_targets, state_targets
+from topoloc.trajectory.dataset import (
+    MAX_OFFSET,
+    Noise,
+    PathEncoder,
+    load_sequences,
+    load_state_targets,
+    state_targets,
+)
 from topoloc.trajectory.generate_dataset import generate, table_i
 from topoloc.trajectory.paths import Path, sample_paths
-from trajectory_helpers import make_graph, random_graph
 
 STRAIGHT = 10  # straight token with 20 bins
 LEFT = quantize_angle(90.0, 20)

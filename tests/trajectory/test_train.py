@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from trajectory_helpers import random_graph
 
 from tests.conftest import make_config
 from topoloc.trajectory.dataset import load_sequences
@@ -12,7 +13,7 @@ from topoloc.trajectory.evaluate_rnn import accuracy_by_position, prefix_majorit
 from topoloc.trajectory.generate_dataset import generate
 from topoloc.trajectory.model import IGNORE, LengthBucketBatches, TrajectoryRNN, pad_batch, predict
 from topoloc.trajectory.train_rnn import build_model, fit
-from trajectory_helpers import random_graph
+
 
 def confs(**train):
     """The config of a small, fast training (schema defaults otherwise), ``train`` keys on top."""

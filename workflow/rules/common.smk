@@ -47,6 +47,15 @@ def code(module):
     return code_digest_of(module, LIBRARY) if LIBRARY.is_dir() else code_digest_of(module)
 
 
+def decode_conf(drive):
+    """What decode_trajectories reads: the localizers' settings and the start spacing, not the evaluation's
+    (changing a tolerance of the evaluation reruns the evaluation, not the localizers)."""
+    loc = {k: v for k, v in config["localization"].items() if k not in ("evaluate", "max_offmap_m", "min_explained_turns")}
+    ev = config["localization"]["evaluate"]
+    loc["evaluate"] = {k: ev[k] for k in ("start_every_m", "initial_hypotheses")}
+    return {"localization": loc, "segmentation": config["segmentation"], "encoding": config["encoding"], "drive": drive}
+
+
 def local_osm_file(wildcards):
     """The region's local OSM file as an input (changes rerun download_osm); none for pyrosm/place/bbox."""
     osm_file = config["region"]["osm_file"]

@@ -10,7 +10,7 @@ rule decode_trajectories:
         stats="results/{region}/localization/{drive}/decoded.json",
         geojson="results/{region}/localization/{drive}/localization.geojson",
     params:
-        conf=lambda wildcards: {k: config[k] for k in ("localization", "segmentation", "encoding")} | {"drive": wildcards.drive},
+        conf=lambda wildcards: decode_conf(wildcards.drive),
         code=code("topoloc.localization.decode_trajectories"),
     log:
         "results/{region}/logs/decode_trajectories_{drive}.log",

@@ -141,7 +141,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         segments = pd.read_csv(inputs[f"segments_{drive}"])
         corners = np.append(segments.start_frame.to_numpy(), segments.end_frame.to_numpy()[-1:]) if len(segments) else None
         facts = stats["localizers"]
-        initial = next((facts[n]["initial_hypotheses"] for n in ("strategy1", "hmm") if facts.get(n, {}).get("initial_hypotheses")), [])
+        initial = next((f["initial_hypotheses"] for f in facts.values() if f.get("initial_hypotheses")), [])  # config order
         plot_fig9(graph, answers[answers.start == answers.start.min()], frames, corners, initial[:int(ev["initial_hypotheses"])],
                   first[-1].set_index("localizer").to_dict(orient="index"), {n: label(n) for n in facts},
                   outputs[f"fig9_{drive}"], f"Fig. 9, {conf.get('region', '')} drive {drive}, from frame 0")

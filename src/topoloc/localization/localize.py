@@ -1,5 +1,5 @@
-"""Helpers shared by the ``decode_trajectories`` stage and the ``topoloc localize`` CLI: checks of a drive
-against the map, and the GeoJSON of a localizer's answers."""
+"""Checks of a drive against the map (used by the ``topoloc localize`` CLI) and the GeoJSON of a localizer's
+answers (the CLI and the ``decode_trajectories`` stage)."""
 
 from __future__ import annotations
 

@@ -30,7 +30,15 @@ from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json
 from topoloc.motion.georef import Georeference, fit_rigid, from_origin, grid_heading_deg, to_map
-from topoloc.motion.poses import planar_track, planar_yaw, poses_from_planar, read_gps, read_poses, read_times, write_poses
+from topoloc.motion.poses import (
+    planar_track,
+    planar_yaw,
+    poses_from_planar,
+    read_gps,
+    read_poses,
+    read_times,
+    write_poses,
+)
 from topoloc.odometry.evaluate import align_rigid, evaluate
 from topoloc.odometry.mapmatch import match_track
 from topoloc.odometry.plot import plot_evaluation, plot_track

@@ -20,8 +20,15 @@ import numpy as np
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import write_json
-from topoloc.place.images import (PlaceSet, make_rig, polyline_distance, render_conditions, render_training_set,
-                                  repeat_poses, route_path)
+from topoloc.place.images import (
+    PlaceSet,
+    make_rig,
+    polyline_distance,
+    render_conditions,
+    render_training_set,
+    repeat_poses,
+    route_path,
+)
 from topoloc.render.conditions import CONDITIONS, check_conditions
 from topoloc.render.drives import drive_scene, route_seed, sample_frames
 from topoloc.render.plot import contact_sheet

@@ -22,7 +22,16 @@ from topoloc.render.conditions import Condition
 from topoloc.render.raycast import cast
 from topoloc.render.rig import StereoRig
 from topoloc.render.scene import Scene
-from topoloc.render.textures import GRAIN_SIZE, GRAIN_TEXEL_M, PAVING, SKY_WIDTH, TEXEL_M, TILE_H, TILE_W, sky_panorama
+from topoloc.render.textures import (
+    GRAIN_SIZE,
+    GRAIN_TEXEL_M,
+    PAVING,
+    SKY_WIDTH,
+    TEXEL_M,
+    TILE_H,
+    TILE_W,
+    sky_panorama,
+)
 
 NOISE_BANK = 16
 DETAIL_NEAR_M, DETAIL_FAR_M = 25.0, 60.0

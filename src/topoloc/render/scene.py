@@ -34,8 +34,17 @@ from tqdm import tqdm
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.render.raycast import Walls
-from topoloc.render.textures import (SIDEWALK_M, TEXEL_M, TILE_H, TILE_W, Road, draw_ground, facade_texture,
-                                     grain_tile, road_width)
+from topoloc.render.textures import (
+    SIDEWALK_M,
+    TEXEL_M,
+    TILE_H,
+    TILE_W,
+    Road,
+    draw_ground,
+    facade_texture,
+    grain_tile,
+    road_width,
+)
 
 log = logging.getLogger(__name__)
 

@@ -23,7 +23,7 @@ import pandas as pd  # noqa: E402
 
 from topoloc.io import atomic_path, write_json, write_text  # noqa: E402
 from topoloc.trajectory.dataset import load_sequences  # noqa: E402
-from topoloc.trajectory.model import TrajectoryRNN, predict  # noqa: E402
+from topoloc.trajectory.model import load_model, predict  # noqa: E402
 
 log = logging.getLogger(__name__)
 
@@ -154,7 +154,7 @@ def markdown_table(tables: dict[str, pd.DataFrame], region: str) -> str:
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
     """Evaluate ``inputs['model']`` on ``train``/``val``; write ``table``, ``csv``, ``metrics``, ``loss_figure``, ``accuracy_figure``."""
     region = conf.get("region", "")
-    model = TrajectoryRNN.load_from_checkpoint(inputs["model"], map_location="cpu")
+    model = load_model(inputs["model"])
     limit = conf["evaluate"]["max_train_trajectories"]
     data = {"train": load_sequences(inputs["train"], limit), "held-out": load_sequences(inputs["val"])}
     tables = {split: accuracy_by_position(predict(model, tokens), labels) for split, (tokens, labels) in data.items()}
