@@ -95,3 +95,17 @@ def test_filters_started_together_or_later_agree_with_a_single_filter(grid):
             assert (answers[b].edge, answers[b].cell) == (want.edge, want.cell)
             assert answers[b].confidence == pytest.approx(want.confidence, rel=1e-9, abs=1e-12)
     assert (bank.trace(2) == late.trace()).all()
+
+
+def test_filter_max_is_the_largest_entry_of_each_filter(grid):
+    graph, road, conf = grid
+    model = MetricModel(graph, road.states, MetricSettings.from_conf(conf["localization"]["metric"]))
+    bank = MetricFilter(model, filters=4)
+    rng = np.random.default_rng(0)
+    assert bank.classes == 5
+    group = rng.choice([0, 1, 2, 3, 4, 5, 12, 13, 14], 1000)  # filters 0, 1 and 2 (groups 10-14); none of filter 3
+    weight = rng.random(len(group)).astype(np.float32)
+    bank._set(group, rng.integers(0, bank.num_cells, len(group)), weight, np.zeros(len(group), np.float32),
+              np.ones(len(group), np.complex64))
+    want = [weight[group // bank.classes == b].max() if (group // bank.classes == b).any() else 0.0 for b in range(4)]
+    assert bank._filter_max(weight) == pytest.approx(want)

@@ -2,8 +2,8 @@
 
 A belief is a set of *entries* (in no particular order): a group, a cell, its probability and its heading-offset
 belief (von Mises: mean and concentration), kept only where the probability is at least ``prune`` times the
-mean entry of its filter. Several *filters* (the starts of a multi-start evaluation) share every step, so its cost is paid once per step, not once per
-start. Within a filter, once the belief is no longer spread over much of the map, it splits into
+largest of its filter. Several *filters* (the starts of a multi-start evaluation) share every step, so its cost
+is paid once per step, not once per start. Within a filter, once the belief is no longer spread over much of the map, it splits into
 ``scale_classes`` *groups*, one per odometry scale error in ``[-scale_error_max, scale_error_max]``: a group
 with scale error ``s`` moves ``1 / (1 + s)`` cells per step on average (an extra or a skipped move now and
 then), so the group whose lengths agree with the map's wins at the turns, and a systematic scale error of
@@ -94,6 +94,21 @@ class MetricFilter:
     def _counts(self, size: int = 1) -> NDArray[np.int64]:
         """Entries of every group (``size`` 1) or filter (``size`` = classes)."""
         return np.bincount(self.group // size, minlength=self.filters * self.classes // size)
+
+    def _filter_max(self, values: NDArray[np.floating]) -> NDArray[np.float64]:
+        """Per filter, the largest of its entries' ``values`` (0 for a filter without entries).
+
+        Sorted by filter (a radix sort for 16-bit keys) and reduced per run: several times faster than
+        ``np.maximum.at``, which cost more than the rest of a step."""
+        filt = self.group // self.classes
+        keys = filt.astype(np.int16) if self.filters < 2**15 else filt
+        order = np.argsort(keys, kind="stable")
+        counts = np.bincount(filt, minlength=self.filters)
+        out = np.zeros(self.filters)
+        some = counts > 0
+        if some.any():
+            out[some] = np.maximum.reduceat(values[order], (np.cumsum(counts) - counts)[some])
+        return out
 
     def _merged(self, b: int, fresh: NDArray[np.float64] | None = None) -> tuple[NDArray, ...]:
         """Filter ``b``'s entries summed over its groups (plus ``fresh`` mass of unknown offset per cell), as
@@ -246,9 +261,7 @@ class MetricFilter:
         total = np.where(total > 0, total, 1.0)
         self.weight = weight / total[filt].astype(REAL)
         self.offmap = offmap / total
-        # relative to the mean entry of the filter (a per-filter maximum costs more than the rest of the step)
-        mean_entry = on_map / total / np.maximum(np.bincount(filt, minlength=self.filters), 1)
-        keep = self.weight >= (self.prune * mean_entry)[filt].astype(REAL)
+        keep = self.weight >= (self.prune * self._filter_max(self.weight))[filt].astype(REAL)
         self.group, self.cell, self.weight, self.kappa, self.mean = self._keep(keep)
         self._split()
         self._remember(direction, yaw)
