@@ -74,7 +74,8 @@ def test_pipeline_caching_and_tracking(workflow):
     assert "| method | Mean | overcast | sunset | rain | fog (held out) | night |" in (teach_repeat / "tables.md").read_text()
     assert {"network_within_5m_fog", "correlation_within_5m_night", "embed_images_per_s"} <= set(
         children["localize_repeat"].data.metrics)
-    assert {"val/acc_fog", "best/val/acc_fog", "train/loss_step"} <= set(children["train_retrieval"].data.metrics)
+    # (train/loss_step only once a run reaches log_every_n_steps: the tiny test training may stop before)
+    assert {"val/acc_fog", "best/val/acc_fog", "best/epoch"} <= set(children["train_retrieval"].data.metrics)
     assert {"train/loss_step", "val/loss", "val/acc_last", "best/val/loss"} <= set(children["train_rnn"].data.metrics)
     import mlflow
 
