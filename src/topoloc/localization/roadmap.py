@@ -110,7 +110,8 @@ class RoadLocalizer(Localizer):
     def run_starts(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any],
                    starts: NDArray[np.int64]) -> list[tuple[int, Observations, Track]]:
         """The drive from every start frame, nothing before it known: (start, observations with absolute
-        frames, track) per start that gives any observation. Localizers may run all starts at once."""
+        frames, track) per start that gives any observation; ``track.extra["summary"]`` holds :meth:`summary` of that
+        start. Localizers may run all starts at once."""
         out = []
         for start in np.asarray(starts, np.int64):
             observations = self.observe(odometry.cut(int(start)), map, conf)
@@ -118,6 +119,7 @@ class RoadLocalizer(Localizer):
                 continue
             self.reset(map, conf)
             track = self.run(observations.items)
+            track.extra["summary"] = self.summary()  # this start's facts (initial hypotheses, restarts, ...)
             out.append((int(start), Observations(observations.items, observations.frame + int(start), observations.extra), track))
         return out
 
