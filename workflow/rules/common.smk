@@ -80,7 +80,7 @@ def all_outputs():
 
 
 # Odometry drives: {drive} ranges over odometry.drives (kitti_*) or sim00.. (simulated).
-from topoloc.odometry.extract_odometry import drive_names
+from topoloc.odometry.drives import drive_names
 
 try:
     DRIVES = drive_names(config["odometry"], config["render"])

@@ -39,33 +39,14 @@ from topoloc.motion.poses import (
     read_times,
     write_poses,
 )
+from topoloc.odometry.drives import SOURCES, simulated_drive_names
 from topoloc.odometry.evaluate import align_rigid, evaluate
 from topoloc.odometry.mapmatch import match_track
 from topoloc.odometry.plot import plot_evaluation, plot_track
 from topoloc.odometry.simulate import simulate_drive
 from topoloc.odometry.stereo_vo import run_stereo_vo
-from topoloc.render.conditions import rendered_drive_names
 
 log = logging.getLogger(__name__)
-
-SOURCES = ("simulated", "kitti_poses", "kitti_stereo", "rendered")
-
-
-def simulated_drive_names(conf: dict[str, Any]) -> list[str]:
-    """Drive wildcards of the simulated source: ``sim00``, ``sim01``, ..."""
-    return [f"sim{i:02d}" for i in range(int(conf["simulated"]["drives"]))]
-
-
-def drive_names(conf: dict[str, Any], render: dict[str, Any] | None = None) -> list[str]:
-    """The drives the workflow builds for the ``odometry`` config slice (and ``render`` for the rendered source)."""
-    if conf["source"] == "simulated":
-        return simulated_drive_names(conf)
-    if conf["source"] == "rendered":
-        if render is None:
-            raise InputError("render", "odometry.source rendered needs the render config section")
-        return rendered_drive_names(render)
-    return list(conf["drives"])
-
 
 def _georeference(track: np.ndarray, yaw0: float, gps_xy: np.ndarray | None, conf: dict[str, Any], crs: str) -> Georeference:
     if gps_xy is not None:
