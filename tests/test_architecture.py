@@ -22,7 +22,7 @@ LAYERS = {
     # 2 sensors: rendered images, odometry
     "render": 2, "odometry": 2,
     # 3 task libraries
-    "localization": 3, "trajectory": 3, "place": 3,
+    "localization": 3, "trajectory": 3, "place": 3, "drive": 3,
     # 4 localizers (registered implementations of topoloc.localizer) and the registry that discovers them
     "localizers": 4, "registry": 4,
     # 6 entry points (5 is the stage modules)
