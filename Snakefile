@@ -19,6 +19,7 @@ include: "workflow/rules/extract_odometry.smk"
 include: "workflow/rules/segment_trajectory.smk"
 include: "workflow/rules/trajectory.smk"
 include: "workflow/rules/place.smk"
+include: "workflow/rules/drive.smk"
 include: "workflow/rules/localization.smk"
 
 

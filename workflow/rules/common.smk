@@ -76,6 +76,7 @@ def all_outputs():
         *expand(rules.localize_repeat.output, region=REGION),
         *expand(rules.build_topometric_map.output, region=REGION),
         *expand(rules.render_places.output, region=REGION, split=["train", "teach", "repeat"]),
+        *expand(rules.follow_route.output, region=REGION),
     ]
 
 

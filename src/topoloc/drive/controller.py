@@ -1,0 +1,132 @@
+"""Topo-DLM: the conditional imitation-learning controller of Cai & Wan (Codevilla et al.'s branched network).
+
+* **Image encoder**: each image normalised by its local contrast (:func:`topoloc.place.network.local_normalize`:
+  most of a condition's brightness and colour cast drops out), then one stage per ``channels`` entry
+  (3x3 convolution with stride 2, batch norm, ReLU, 3x3 convolution, batch norm, ReLU), flattened, a fully
+  connected layer of ``hidden`` units with dropout.
+* **Measurement encoder**: the speed (divided by ``max_speed``) through two layers of 64 units.
+* **Joint layer** of ``hidden`` units, then one **branch** per navigation command (follow, left, right,
+  straight; two layers) giving (steer, throttle); the command selects the branch. A further head predicts
+  the speed from the image alone (an auxiliary loss, as in Codevilla et al. 2019).
+* **Loss**: ``steer_weight (steer - s)^2 + (1 - steer_weight) (throttle - t)^2`` of the commanded branch, plus
+  ``speed_weight`` times the squared error of the speed prediction. Adam.
+
+``forward`` takes one tensor ``(N, C + 2, H, W)``: the image (0..255) with two constant planes appended, the
+speed in m/s and the command index; it returns ``(N, 2)`` (steer, throttle): the signature of the logged
+MLflow model. :meth:`TopoDLM.act` is the closed-loop call. Plain torch, trained from scratch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import lightning as L
+import numpy as np
+import torch
+from numpy.typing import NDArray
+from torch import nn
+from torch.nn import functional as F
+
+from topoloc.errors import InputError
+from topoloc.place.network import augment, local_normalize
+from topoloc.place.topometric_map import COMMANDS
+
+
+def _stage(cin: int, cout: int) -> nn.Sequential:
+    return nn.Sequential(nn.Conv2d(cin, cout, 3, 2, 1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True),
+                         nn.Conv2d(cout, cout, 3, 1, 1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True))
+
+
+class TopoDLM(L.LightningModule):
+    """The branched controller of the module docstring."""
+
+    def __init__(self, in_channels: int = 3, height: int = 48, width: int = 160, channels: Sequence[int] = (24, 32, 48, 64),
+                 hidden: int = 256, dropout: float = 0.3, max_speed: float = 12.0, lr: float = 1e-3,
+                 weight_decay: float = 1e-4, steer_weight: float = 0.75, speed_weight: float = 0.1, augment: bool = True,
+                 seed: int = 0) -> None:
+        super().__init__()
+        self.save_hyperparameters()
+        chans = [in_channels, *[int(c) for c in channels]]
+        self.encoder = nn.Sequential(*[_stage(a, b) for a, b in zip(chans[:-1], chans[1:])])
+        with torch.no_grad():
+            flat = self.encoder(torch.zeros(1, in_channels, height, width)).numel()
+        self.image_fc = nn.Sequential(nn.Linear(flat, hidden), nn.ReLU(inplace=True), nn.Dropout(dropout))
+        self.speed_fc = nn.Sequential(nn.Linear(1, 64), nn.ReLU(inplace=True), nn.Linear(64, 64), nn.ReLU(inplace=True))
+        self.joint = nn.Sequential(nn.Linear(hidden + 64, hidden), nn.ReLU(inplace=True), nn.Dropout(dropout))
+        self.branches = nn.ModuleList([nn.Sequential(nn.Linear(hidden, hidden // 2), nn.ReLU(inplace=True),
+                                                     nn.Dropout(dropout), nn.Linear(hidden // 2, 2))
+                                       for _ in COMMANDS])
+        self.speed_head = nn.Sequential(nn.Linear(hidden, 64), nn.ReLU(inplace=True), nn.Linear(64, 1))
+        self._generator: torch.Generator | None = None
+
+    def _heads(self, images: torch.Tensor, speed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """All branches' outputs (N, commands, 2) and the speed prediction (N,) of float images (0..255)."""
+        feat = self.image_fc(torch.flatten(self.encoder(local_normalize(images)), 1))
+        joint = self.joint(torch.cat([feat, self.speed_fc(speed[:, None] / self.hparams.max_speed)], dim=1))
+        return torch.stack([b(joint) for b in self.branches], dim=1), self.speed_head(feat)[:, 0]
+
+    def forward(self, inputs: torch.Tensor) -> torch.Tensor:
+        """(steer, throttle) ``(N, 2)`` of ``(N, C + 2, H, W)``: image, speed plane (m/s), command plane (index)."""
+        c = int(self.hparams.in_channels)
+        images, speed, command = inputs[:, :c].float(), inputs[:, c, 0, 0].float(), inputs[:, c + 1, 0, 0].long()
+        out, _ = self._heads(images, speed)
+        return out[torch.arange(len(out)), command.clamp(0, len(COMMANDS) - 1)]
+
+    @torch.no_grad()
+    def act(self, image: NDArray[np.uint8], speed: float, command: int) -> tuple[float, float]:
+        """Steer and throttle for one camera image (H, W, C) uint8, the speed (m/s) and a command index."""
+        self.eval()
+        x = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
+        out, _ = self._heads(x, torch.tensor([float(speed)]))
+        steer, throttle = out[0, int(command)].tolist()
+        return float(np.clip(steer, -1.0, 1.0)), float(np.clip(throttle, -1.0, 1.0))
+
+    # -- training ----------------------------------------------------------------------------------------
+    def _step(self, batch: Any, stage: str) -> torch.Tensor:
+        images, speed, command, target = batch
+        x = images.permute(0, 3, 1, 2).float()
+        if stage == "train" and self.hparams.augment:
+            if self._generator is None:
+                self._generator = torch.Generator(device=x.device).manual_seed(int(self.hparams.seed))
+            x = augment(x, self._generator, shift_px=0)
+        out, speed_pred = self._heads(x, speed)
+        chosen = out[torch.arange(len(out)), command]
+        w = float(self.hparams.steer_weight)
+        err = (chosen - target) ** 2
+        control = (w * err[:, 0] + (1.0 - w) * err[:, 1]).mean()
+        speed_loss = F.mse_loss(speed_pred, speed / self.hparams.max_speed)
+        loss = control + float(self.hparams.speed_weight) * speed_loss
+        opts = {"on_epoch": True, "batch_size": len(x)}
+        self.log(f"{stage}/loss", loss, prog_bar=True, on_step=stage == "train", **opts)
+        self.log(f"{stage}/steer_mae", (chosen[:, 0] - target[:, 0]).abs().mean(), on_step=False, **opts)
+        self.log(f"{stage}/throttle_mae", (chosen[:, 1] - target[:, 1]).abs().mean(), on_step=False, **opts)
+        return loss
+
+    def training_step(self, batch: Any, batch_idx: int) -> torch.Tensor:
+        return self._step(batch, "train")
+
+    def validation_step(self, batch: Any, batch_idx: int) -> None:
+        self._step(batch, "val")
+
+    def configure_optimizers(self) -> Any:
+        return torch.optim.Adam(self.parameters(), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay)
+
+
+def load_controller(path: str | Path, image_shape: tuple[int, int, int] | None = None,
+                    where: str = "place.image") -> TopoDLM:
+    """The controller of a ``train_controller`` checkpoint, on the CPU, in eval mode.
+
+    InputError naming the file when it is not one, or ``where`` when it was trained on images of another
+    shape than ``image_shape`` (H, W, C).
+    """
+    try:
+        model = TopoDLM.load_from_checkpoint(str(path), map_location="cpu")
+    except (OSError, RuntimeError, KeyError, TypeError) as err:
+        raise InputError(path, f"not a controller checkpoint ({err})") from err
+    hp = model.hparams
+    if image_shape is not None and (int(hp.height), int(hp.width), int(hp.in_channels)) != tuple(image_shape):
+        raise InputError(where, f"the controller {path} was trained on {hp.width}x{hp.height}x{hp.in_channels} images, "
+                         f"not {image_shape[1]}x{image_shape[0]}x{image_shape[2]}")
+    return model.eval()

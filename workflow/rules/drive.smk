@@ -1,0 +1,112 @@
+# Route following under appearance change (Cai & Wan): closed-loop simulator, expert demonstrations, Topo-DLM,
+# teach and repeat in closed loop.
+
+
+def drive_conf(*drive_keys):
+    """The config slice of a drive stage: the named drive keys, the place keys of the camera and the teach route,
+    and the render keys of the route and the scene."""
+    unused = ("routes", "conditions", "sheet", "width", "height", "baseline_m")
+    return {"drive": {k: config["drive"][k] for k in drive_keys},
+            "place": {k: config["place"][k] for k in ("route", "image", "command", "teach_condition", "repeat_conditions",
+                                                      "odometry_noise", "localize")},
+            "render": {k: v for k, v in config["render"].items() if k not in unused}}
+
+
+rule simulate_demonstrations:
+    """The expert's noisy drives on training routes away from the teach route, under the training conditions."""
+    input:
+        osm=rules.download_osm.output.osm,
+        graph=rules.build_graph.output.graph,
+    output:
+        demonstrations="results/{region}/drive/demonstrations.npz",
+        stats="results/{region}/drive/demonstrations.json",
+        sheet=report(
+            "results/{region}/drive/demonstrations.png",
+            caption="../report/drive_demonstrations.rst",
+            category="Route following",
+            labels={"region": "{region}", "figure": "demonstrations"},
+        ),
+    params:
+        conf=drive_conf("seed", "vehicle", "episode", "lane", "expert", "noise", "demonstrations", "follow"),
+        code=code("topoloc.drive.simulate_demonstrations"),
+    log:
+        "results/{region}/logs/simulate_demonstrations.log",
+    benchmark:
+        "results/{region}/benchmarks/simulate_demonstrations.tsv"
+    script:
+        "../scripts/simulate_demonstrations.py"
+
+
+rule train_controller:
+    """Train Topo-DLM (Lightning); the model is logged to MLflow with its signature."""
+    input:
+        demonstrations=rules.simulate_demonstrations.output.demonstrations,
+    output:
+        model="results/{region}/drive/controller.ckpt",
+        history="results/{region}/drive/controller_history.csv",
+        metrics="results/{region}/drive/controller_metrics.json",
+        figure=report(
+            "results/{region}/drive/controller_training.png",
+            caption="../report/drive_training.rst",
+            category="Route following",
+            labels={"region": "{region}", "figure": "controller training"},
+        ),
+    params:
+        conf={"drive": {k: config["drive"][k] for k in ("threads", "vehicle", "network", "train")}
+              | {"demonstrations": {"val_routes": config["drive"]["demonstrations"]["val_routes"]}}},
+        code=code("topoloc.drive.train_controller"),
+    log:
+        "results/{region}/logs/train_controller.log",
+    benchmark:
+        "results/{region}/benchmarks/train_controller.tsv"
+    threads: config["drive"]["threads"]
+    script:
+        "../scripts/train_controller.py"
+
+
+rule follow_route:
+    """Teach and repeat in closed loop: Topo-DLM and replay, ground-truth and place localization, per condition."""
+    input:
+        osm=rules.download_osm.output.osm,
+        graph=rules.build_graph.output.graph,
+        controller=rules.train_controller.output.model,
+        model=rules.train_retrieval.output.model,
+        map=rules.build_topometric_map.output.map,
+    output:
+        episodes="results/{region}/drive/follow/episodes.csv",
+        summary="results/{region}/drive/follow/summary.csv",
+        metrics="results/{region}/drive/follow/metrics.json",
+        table=report(
+            "results/{region}/drive/follow/tables.md",
+            caption="../report/drive_table.rst",
+            category="Route following",
+            labels={"region": "{region}", "figure": "success per condition"},
+        ),
+        paths=report(
+            "results/{region}/drive/follow/paths.png",
+            caption="../report/drive_paths.rst",
+            category="Route following",
+            labels={"region": "{region}", "figure": "driven paths"},
+        ),
+        success=report(
+            "results/{region}/drive/follow/success.png",
+            caption="../report/drive_success.rst",
+            category="Route following",
+            labels={"region": "{region}", "figure": "success bars"},
+        ),
+        strip=report(
+            "results/{region}/drive/follow/strip.png",
+            caption="../report/drive_strip.rst",
+            category="Route following",
+            labels={"region": "{region}", "figure": "frame strip"},
+        ),
+    params:
+        conf=drive_conf("seed", "threads", "vehicle", "episode", "lane", "expert", "demonstrations", "follow"),
+        code=code("topoloc.drive.follow_route"),
+    log:
+        "results/{region}/logs/follow_route.log",
+    benchmark:
+        "results/{region}/benchmarks/follow_route.tsv"
+    threads: config["drive"]["threads"]
+    script:
+        "../scripts/follow_route.py"
