@@ -52,7 +52,7 @@ rule train_controller:
             labels={"region": "{region}", "figure": "controller training"},
         ),
     params:
-        conf={"drive": {k: config["drive"][k] for k in ("threads", "vehicle", "network", "train")}
+        conf={"drive": {k: config["drive"][k] for k in ("threads", "vehicle", "expert", "network", "train")}
               | {"demonstrations": {"val_routes": config["drive"]["demonstrations"]["val_routes"]}}},
         code=code("topoloc.drive.train_controller"),
     log:

@@ -210,8 +210,8 @@ def run_episode(sim: Simulator, agent: Any, localization: Any, topo: TopometricM
             slow_steps += 1
             control = Control(control.steer, min(control.throttle, gain * (slow - obs.speed)))
         if every and sim.t % every == 0 and len(frames) < strip_frames:
-            frames.append((obs.image, f"t={sim.t / sim.spec.control_hz:.0f}s {COMMANDS[int(topo.command[vertex])]} "
-                                      f"{control.steer:+.2f}"))
+            frames.append((obs.image, (f"t={sim.t / sim.spec.control_hz:.0f}s {COMMANDS[int(topo.command[vertex])]} "
+                                      f"{control.steer:+.2f}")))
         obs, status = sim.step(control)
         xy.append(sim.centre)
         lat.append(abs(sim.lateral))

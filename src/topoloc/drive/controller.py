@@ -6,18 +6,22 @@
   connected layer of ``hidden`` units with dropout.
 * **Measurement encoder**: the speed (divided by ``max_speed``) through two layers of 64 units.
 * **Joint layer** of ``hidden`` units, then one **branch** per navigation command (follow, left, right,
-  straight; two layers) giving (steer, throttle); the command selects the branch. A further head predicts
+  straight; two layers) giving (steer, target speed); the command selects the branch. The throttle is
+  ``speed_gain`` times the speed error, as the expert's (a network that gives the throttle itself learns that
+  a car at rest stays at rest: the first steps of a drive are too few to teach it otherwise). A further head predicts
   the speed from the image alone (an auxiliary loss, as in Codevilla et al. 2019).
-* **Loss**: ``steer_weight (steer - s)^2 + (1 - steer_weight) (throttle - t)^2`` of the commanded branch, plus
+* **Loss**: ``steer_weight (steer - s)^2 + (1 - steer_weight) (v / max_speed - v')^2`` of the commanded branch
+  (``v`` the expert's target speed), plus
   ``speed_weight`` times the squared error of the speed prediction. Adam.
 
 ``forward`` takes one tensor ``(N, C + 2, H, W)``: the image (0..255) with two constant planes appended, the
-speed in m/s and the command index; it returns ``(N, 2)`` (steer, throttle): the signature of the logged
+speed in m/s and the command index; it returns ``(N, 2)`` (steer, target speed in m/s): the signature of the logged
 MLflow model. :meth:`TopoDLM.act` is the closed-loop call. Plain torch, trained from scratch.
 """
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -43,13 +47,13 @@ class TopoDLM(L.LightningModule):
     """The branched controller of the module docstring."""
 
     def __init__(self, in_channels: int = 3, height: int = 48, width: int = 160, channels: Sequence[int] = (24, 32, 48, 64),
-                 hidden: int = 256, dropout: float = 0.3, max_speed: float = 12.0, lr: float = 1e-3,
+                 hidden: int = 256, dropout: float = 0.3, max_speed: float = 12.0, speed_gain: float = 0.5, lr: float = 1e-3,
                  weight_decay: float = 1e-4, steer_weight: float = 0.75, speed_weight: float = 0.1, augment: bool = True,
                  seed: int = 0) -> None:
         super().__init__()
         self.save_hyperparameters()
         chans = [in_channels, *[int(c) for c in channels]]
-        self.encoder = nn.Sequential(*[_stage(a, b) for a, b in zip(chans[:-1], chans[1:])])
+        self.encoder = nn.Sequential(*[_stage(a, b) for a, b in itertools.pairwise(chans)])
         with torch.no_grad():
             flat = self.encoder(torch.zeros(1, in_channels, height, width)).numel()
         self.image_fc = nn.Sequential(nn.Linear(flat, hidden), nn.ReLU(inplace=True), nn.Dropout(dropout))
@@ -68,11 +72,12 @@ class TopoDLM(L.LightningModule):
         return torch.stack([b(joint) for b in self.branches], dim=1), self.speed_head(feat)[:, 0]
 
     def forward(self, inputs: torch.Tensor) -> torch.Tensor:
-        """(steer, throttle) ``(N, 2)`` of ``(N, C + 2, H, W)``: image, speed plane (m/s), command plane (index)."""
+        """(steer, target speed m/s) ``(N, 2)`` of ``(N, C + 2, H, W)``: image, speed plane (m/s), command plane (index)."""
         c = int(self.hparams.in_channels)
         images, speed, command = inputs[:, :c].float(), inputs[:, c, 0, 0].float(), inputs[:, c + 1, 0, 0].long()
         out, _ = self._heads(images, speed)
-        return out[torch.arange(len(out)), command.clamp(0, len(COMMANDS) - 1)]
+        out = out[torch.arange(len(out)), command.clamp(0, len(COMMANDS) - 1)]
+        return torch.stack([out[:, 0], out[:, 1] * self.hparams.max_speed], dim=1)
 
     @torch.no_grad()
     def act(self, image: NDArray[np.uint8], speed: float, command: int) -> tuple[float, float]:
@@ -80,7 +85,8 @@ class TopoDLM(L.LightningModule):
         self.eval()
         x = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
         out, _ = self._heads(x, torch.tensor([float(speed)]))
-        steer, throttle = out[0, int(command)].tolist()
+        steer, target = out[0, int(command)].tolist()
+        throttle = self.hparams.speed_gain * (target * self.hparams.max_speed - float(speed))
         return float(np.clip(steer, -1.0, 1.0)), float(np.clip(throttle, -1.0, 1.0))
 
     # -- training ----------------------------------------------------------------------------------------
@@ -101,7 +107,8 @@ class TopoDLM(L.LightningModule):
         opts = {"on_epoch": True, "batch_size": len(x)}
         self.log(f"{stage}/loss", loss, prog_bar=True, on_step=stage == "train", **opts)
         self.log(f"{stage}/steer_mae", (chosen[:, 0] - target[:, 0]).abs().mean(), on_step=False, **opts)
-        self.log(f"{stage}/throttle_mae", (chosen[:, 1] - target[:, 1]).abs().mean(), on_step=False, **opts)
+        self.log(f"{stage}/speed_mae", (chosen[:, 1] - target[:, 1]).abs().mean() * self.hparams.max_speed, on_step=False,
+                 **opts)
         return loss
 
     def training_step(self, batch: Any, batch_idx: int) -> torch.Tensor:

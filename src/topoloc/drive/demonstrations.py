@@ -3,7 +3,7 @@
 Per training route and training condition (``drive.demonstrations``) the expert
 (:mod:`topoloc.drive.expert`) drives the route in the simulator with noise injection; every
 ``record_every``-th step is kept with its camera image (the place images' camera), speed, command, the
-expert's steering and throttle (the labels), whether the step was perturbed, the pose and the lateral
+expert's steering, throttle and target speed (the labels), whether the step was perturbed, the pose and the lateral
 offset, and the **local path** (the lane's next ``LOCAL_PATH_M`` metres in the vehicle frame, every metre:
 what Topo-LP would be given). Steps closer than ``min_distance_m`` to the evaluation route are dropped,
 so training and evaluation places are disjoint; a route keeping fewer than ``min_steps`` steps is drawn
@@ -53,7 +53,7 @@ def local_path(route: DriveRoute, s: float, xy: NDArray[np.float64], yaw: float)
 @dataclass
 class Demonstrations:
     """Recorded steps: ``images`` (n, H, W, C) uint8 and per step its route, condition index, speed, command,
-    labels ``steer`` / ``throttle``, ``perturbed``, pose ``xy`` / ``yaw``, ``lateral`` offset and ``path`` (n, 20, 2)."""
+    labels ``steer`` / ``throttle`` / ``target_speed``, ``perturbed``, pose ``xy`` / ``yaw``, ``lateral`` offset and ``path`` (n, 20, 2)."""
 
     images: NDArray[np.uint8]
     conditions: list[str]
@@ -63,13 +63,14 @@ class Demonstrations:
     command: NDArray[np.int64]
     steer: NDArray[np.float32]
     throttle: NDArray[np.float32]
+    target_speed: NDArray[np.float32]
     perturbed: NDArray[np.bool_]
     xy: NDArray[np.float64]
     yaw: NDArray[np.float64]
     lateral: NDArray[np.float32]
     path: NDArray[np.float32]
 
-    FIELDS = ("route", "condition", "speed", "command", "steer", "throttle", "perturbed", "xy", "yaw", "lateral", "path")
+    FIELDS = ("route", "condition", "speed", "command", "steer", "throttle", "target_speed", "perturbed", "xy", "yaw", "lateral", "path")
 
     def __len__(self) -> int:
         return len(self.images)
@@ -111,19 +112,19 @@ def record(sim: Simulator, expert: Expert, condition: str, seed: int, noise: Noi
         if sim.t % every == 0:
             centre = sim.centre
             rows.append((as_input(obs.image, color), obs.speed, sim.route.command_at(sim.s), label.steer, label.throttle,
-                         offset != 0.0, centre, sim.state.yaw, sim.lateral, local_path(sim.route, sim.s, centre, sim.state.yaw)))
+                         expert.last_target, offset != 0.0, centre, sim.state.yaw, sim.lateral, local_path(sim.route, sim.s, centre, sim.state.yaw)))
         obs, status = sim.step(Control(float(np.clip(label.steer + offset, -1, 1)), label.throttle))
     if status != SUCCESS:
         rows = rows[: max(0, len(rows) - DROP_BEFORE_FAILURE // every)]
     n = len(rows)
-    cols = list(zip(*rows)) if rows else [[] for _ in range(10)]
+    cols = list(zip(*rows)) if rows else [[] for _ in range(11)]
     shape = (0, sim.rig.height, sim.rig.width, 3 if color else 1)
     demo = Demonstrations(np.stack(cols[0]) if n else np.zeros(shape, np.uint8), list(conditions),
                           np.full(n, route_index, np.int64), np.full(n, conditions.index(condition), np.int64),
                           np.asarray(cols[1], np.float32), np.asarray(cols[2], np.int64), np.asarray(cols[3], np.float32),
-                          np.asarray(cols[4], np.float32), np.asarray(cols[5], bool), np.asarray(cols[6], float).reshape(n, 2),
-                          np.asarray(cols[7], float), np.asarray(cols[8], np.float32),
-                          np.asarray(cols[9], np.float32).reshape(n, LOCAL_PATH_M, 2))
+                          np.asarray(cols[4], np.float32), np.asarray(cols[5], np.float32), np.asarray(cols[6], bool),
+                          np.asarray(cols[7], float).reshape(n, 2), np.asarray(cols[8], float), np.asarray(cols[9], np.float32),
+                          np.asarray(cols[10], np.float32).reshape(n, LOCAL_PATH_M, 2))
     return demo, status
 
 

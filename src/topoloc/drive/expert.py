@@ -64,18 +64,18 @@ class Expert:
     def __init__(self, route: DriveRoute, spec: VehicleSpec, settings: ExpertSettings) -> None:
         self.route, self.spec, self.settings = route, spec, settings
         self.speed = speed_profile(route, settings, spec.max_speed_mps)
-        self.s_rear = 0.0
+        self.s_rear, self.last_target = 0.0, 0.0
 
     def reset(self) -> None:
         """Forget the progress of the last episode."""
-        self.s_rear = 0.0
+        self.s_rear, self.last_target = 0.0, 0.0
 
     def target_speed(self, s: float) -> float:
         """The profile's speed at arc length ``s``."""
         return float(self.speed[self.route.index(s)])
 
     def control(self, state: VehicleState) -> Control:
-        """The expert's control at ``state``."""
+        """The expert's control at ``state`` (its target speed is kept as ``last_target``)."""
         route, spec, cfg = self.route, self.spec, self.settings
         rear = np.array([state.x, state.y])
         self.s_rear, _, _ = route.project(rear, self.s_rear)
@@ -89,7 +89,8 @@ class Expert:
         delta = np.arctan2(2.0 * spec.wheelbase_m * np.sin(alpha), look)
         steer = float(np.clip(delta / np.radians(spec.max_steer_deg), -1.0, 1.0))
         centre_s = self.s_rear + 0.5 * spec.wheelbase_m
-        throttle = float(np.clip(cfg.speed_gain * (self.target_speed(centre_s) - state.v), -1.0, 1.0))
+        self.last_target = self.target_speed(centre_s)
+        throttle = float(np.clip(cfg.speed_gain * (self.last_target - state.v), -1.0, 1.0))
         return Control(steer, throttle)
 
 

@@ -17,6 +17,7 @@ per condition and the mean, held-out conditions of the controller's training mar
 from __future__ import annotations
 
 import logging
+from functools import partial
 from typing import Any, cast
 
 import numpy as np
@@ -68,6 +69,11 @@ def paper_table(summary: pd.DataFrame, column: str, held_out: list[str], fmt: st
     return "\n".join(lines)
 
 
+def place_localization(name: str, topo: TopometricMap, model: Any, localize: dict[str, Any]) -> PlaceLocalization:
+    """A new localization by the registered place localizer ``name``."""
+    return PlaceLocalization(cast(PlaceLocalizer, make(name, PLACE_OBSERVATIONS)), topo, model, localize)
+
+
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
     """Drive every repeat; write the episode table, summary, tables, metrics and figures."""
     drive, place = conf["drive"], conf["place"]
@@ -93,8 +99,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
               "replay": lambda: ReplayAgent(teach_steer, teach_speed, float(drive["expert"]["speed_gain"]))}
     locs = {"ground_truth": lambda: GroundTruth(lane_s)}
     for name in place_names:
-        locs[name] = (lambda n: lambda: PlaceLocalization(cast(PlaceLocalizer, make(n, PLACE_OBSERVATIONS)), topo,
-                                                          retrieval, place["localize"]))(name)
+        locs[name] = partial(place_localization, name, topo, retrieval, place["localize"])
     rows, traces, strips = [], {}, []
     runs = [(c, r, a, loc) for c in names["repeat"] for r in range(int(follow["repeats"]))
             for a in follow["agents"] for loc in localizations]
@@ -128,10 +133,10 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     steps_per_s = float(episodes.steps.sum() / (episodes.steps / episodes.steps_per_s).sum())
     facts = {"route_length_m": route.length_m, "drives": float(len(episodes)), "steps_per_s": steps_per_s,
              "turns": float(len({int(c) for c in topo.command[lane_s < route.length_m]} - {0}))}
-    parts = [f"# Route following in closed loop (teach: {place['teach_condition']}; controller trained under "
-             f"{', '.join(trained)}; held out: {', '.join(held_out) or 'none'})", "",
-             f"{int(follow['repeats'])} repeat drive(s) per condition and agent over the first {route.length_m:.0f} m "
-             f"of the teach route; {steps_per_s:.1f} closed-loop steps/s on this machine (render, controller, localization).", ""]
+    parts = [(f"# Route following in closed loop (teach: {place['teach_condition']}; controller trained under "
+             f"{', '.join(trained)}; held out: {', '.join(held_out) or 'none'})"), "",
+             (f"{int(follow['repeats'])} repeat drive(s) per condition and agent over the first {route.length_m:.0f} m "
+             f"of the teach route; {steps_per_s:.1f} closed-loop steps/s on this machine (render, controller, localization)."), ""]
     for title, column, fmt in (("Success rate", "success_rate", "{:.2f}"),
                                ("Share of the route driven", "progress_share", "{:.2f}"),
                                ("Mean localization error (m)", "mean_loc_error_m", "{:.1f}")):

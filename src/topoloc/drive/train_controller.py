@@ -32,8 +32,8 @@ from topoloc.training import fit as fit_module
 log = logging.getLogger(__name__)
 
 
-def _tensors(demos: Demonstrations, idx: np.ndarray) -> TensorDataset:
-    target = np.column_stack([demos.steer[idx], demos.throttle[idx]]).astype(np.float32)
+def _tensors(demos: Demonstrations, idx: np.ndarray, max_speed: float) -> TensorDataset:
+    target = np.column_stack([demos.steer[idx], demos.target_speed[idx] / max_speed]).astype(np.float32)
     return TensorDataset(torch.from_numpy(np.ascontiguousarray(demos.images[idx])), torch.from_numpy(demos.speed[idx]),
                          torch.from_numpy(demos.command[idx]), torch.from_numpy(target))
 
@@ -41,7 +41,7 @@ def _tensors(demos: Demonstrations, idx: np.ndarray) -> TensorDataset:
 class DemoData(L.LightningDataModule):
     """Command-balanced training batches and the validation routes' steps in order."""
 
-    def __init__(self, demos: Demonstrations, val_routes: int, train: dict[str, Any]) -> None:
+    def __init__(self, demos: Demonstrations, val_routes: int, train: dict[str, Any], max_speed: float) -> None:
         super().__init__()
         routes = np.unique(demos.route)
         if len(routes) <= val_routes:
@@ -51,7 +51,7 @@ class DemoData(L.LightningDataModule):
         self.train_idx, self.val_idx = np.flatnonzero(~val), np.flatnonzero(val)
         if not len(self.val_idx):
             raise InputError("drive.demonstrations.val_routes", "no validation step")
-        self.demos, self.train_conf = demos, train
+        self.demos, self.train_conf, self.max_speed = demos, train, max_speed
         counts = np.bincount(demos.command[self.train_idx], minlength=len(COMMANDS)).astype(float)
         self.weights = 1.0 / counts[demos.command[self.train_idx]]
 
@@ -60,10 +60,10 @@ class DemoData(L.LightningDataModule):
         generator = torch.Generator().manual_seed(int(self.train_conf["seed"]))
         sampler = WeightedRandomSampler(self.weights.tolist(), batch * int(self.train_conf["batches_per_epoch"]),
                                         replacement=True, generator=generator)
-        return DataLoader(_tensors(self.demos, self.train_idx), batch_size=batch, sampler=sampler)
+        return DataLoader(_tensors(self.demos, self.train_idx, self.max_speed), batch_size=batch, sampler=sampler)
 
     def val_dataloader(self) -> DataLoader:
-        return DataLoader(_tensors(self.demos, self.val_idx), batch_size=256)
+        return DataLoader(_tensors(self.demos, self.val_idx, self.max_speed), batch_size=256)
 
 
 def build_model(drive: dict[str, Any], demos: Demonstrations) -> TopoDLM:
@@ -71,7 +71,8 @@ def build_model(drive: dict[str, Any], demos: Demonstrations) -> TopoDLM:
     net, train = drive["network"], drive["train"]
     h, w, c = demos.images.shape[1:]
     return TopoDLM(in_channels=c, height=h, width=w, channels=list(net["channels"]), hidden=int(net["hidden"]),
-                   dropout=float(net["dropout"]), max_speed=float(drive["vehicle"]["max_speed_mps"]), lr=float(train["lr"]),
+                   dropout=float(net["dropout"]), max_speed=float(drive["vehicle"]["max_speed_mps"]),
+                   speed_gain=float(drive["expert"]["speed_gain"]), lr=float(train["lr"]),
                    weight_decay=float(train["weight_decay"]), steer_weight=float(train["steer_weight"]),
                    speed_weight=float(train["speed_weight"]), augment=bool(train["augment"]), seed=int(train["seed"]))
 
@@ -90,7 +91,7 @@ def fit(drive: dict[str, Any], demos: Demonstrations, model_path: str, log_model
     """Train on ``demos``; write the best checkpoint to ``model_path``; return the model, history and metrics."""
     train = drive["train"]
     torch.set_num_threads(int(drive["threads"]))
-    data = DemoData(demos, int(drive["demonstrations"]["val_routes"]), train)
+    data = DemoData(demos, int(drive["demonstrations"]["val_routes"]), train, float(drive["vehicle"]["max_speed_mps"]))
     settings = FitSettings.from_config(train, gradient_clip=1.0, early_stopping_patience=None, sanity_val_steps=0,
                                        fast_dev_run=fast_dev_run)
     logged = LoggedModel(signature_example(demos), free_axes=1) if log_model else None

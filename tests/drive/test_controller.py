@@ -1,0 +1,65 @@
+"""Topo-DLM: a controller learned from a few hundred demonstration frames of a straight road stays in its lane,
+and a checkpoint for another image size is refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.drive.conftest import drive_conf, node_at, route_scene
+from topoloc.drive.controller import load_controller
+from topoloc.drive.demonstrations import Demonstrations, record
+from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
+from topoloc.drive.lanes import build_route, plan_route
+from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, VehicleSpec
+from topoloc.drive.train_controller import fit, signature_example
+from topoloc.errors import InputError
+from topoloc.render.rig import StereoRig
+
+
+@pytest.fixture(scope="module")
+def straight(straight_road):
+    graph = straight_road["graph"]
+    drive = drive_conf(train={"batch_size": 32, "batches_per_epoch": 15, "max_epochs": 6, "max_time_min": None,
+                              "accelerator": "cpu", "log_model": False, "log_every_n_steps": 5},
+                       network={"channels": [16, 24, 32], "hidden": 64, "dropout": 0.1},
+                       demonstrations={"val_routes": 1})
+    edges, froms = plan_route(graph, node_at(graph, 0.0, 60.0), node_at(graph, 400.0, 60.0))
+    route = build_route(graph, edges, froms, drive["lane"]["smoothing_m"], drive["lane"]["margin_m"]).cut(260.0)
+    sim = Simulator(route, route_scene(straight_road["osm"], graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
+                    VehicleSpec.from_conf(drive), 100.0)
+    return drive, sim
+
+
+def test_a_controller_from_a_few_hundred_frames_stays_in_lane(straight, tmp_path):
+    drive, sim = straight
+    expert = Expert(sim.route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
+    noise = NoiseSettings.from_conf({**drive["noise"], "share": 0.3})
+    parts = []
+    for r in range(3):  # two routes' worth of frames to train on, the third to validate
+        demo, status = record(sim, expert, "clear_noon", 10 + r, noise, 2, True, ["clear_noon"], r)
+        assert status == SUCCESS
+        parts.append(demo)
+    demos = Demonstrations.concat(parts)
+    assert 300 <= np.sum(demos.route < 2) <= 700 and demos.perturbed.mean() > 0.1
+    model, _history, metrics = fit(drive, demos, str(tmp_path / "controller.ckpt"))
+    assert metrics["best/val/steer_mae"] < 0.1
+    assert model(torch_inputs(demos)).shape == (2, 2)
+    loaded = load_controller(tmp_path / "controller.ckpt", (48, 64, 3))
+    with pytest.raises(InputError, match="trained on 64x48x3 images, not 160x48x3"):
+        load_controller(tmp_path / "controller.ckpt", (48, 160, 3))
+    # Closed loop from a start 0.5 m off the lane centre and 3 degrees off its heading, in a condition never seen.
+    obs = sim.reset("overcast", 5, lateral_m=0.5, yaw_deg=3.0)
+    status, lateral = RUNNING, []
+    while status == RUNNING:
+        obs, status = sim.step(Control(*loaded.act(obs.image, obs.speed, 0)))
+        lateral.append(sim.lateral)
+    assert status == SUCCESS
+    assert np.max(np.abs(lateral[30:])) < 0.8  # back in the lane's middle after 3 s, and kept there
+    assert np.mean(np.abs(lateral[30:])) < 0.4
+
+
+def torch_inputs(demos: Demonstrations):
+    import torch
+
+    return torch.from_numpy(signature_example(demos))
