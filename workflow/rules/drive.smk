@@ -2,16 +2,6 @@
 # teach and repeat in closed loop.
 
 
-def drive_conf(*drive_keys):
-    """The config slice of a drive stage: the named drive keys, the place keys of the camera and the teach route,
-    and the render keys of the route and the scene."""
-    unused = ("routes", "conditions", "sheet", "width", "height", "baseline_m")
-    return {"drive": {k: config["drive"][k] for k in drive_keys},
-            "place": {k: config["place"][k] for k in ("route", "image", "command", "teach_condition", "repeat_conditions",
-                                                      "odometry_noise", "localize")},
-            "render": {k: v for k, v in config["render"].items() if k not in unused}}
-
-
 rule simulate_demonstrations:
     """The expert's noisy drives on training routes away from the teach route, under the training conditions."""
     input:
