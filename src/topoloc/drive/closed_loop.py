@@ -10,7 +10,7 @@ by a localization on the topometric map.
   ``place.localize.threshold``; the agents then slow down to ``slow_mps`` (as the paper does while relocalizing).
 * **Agents**: :class:`DLMAgent` (Topo-DLM: the image, the speed and the vertex's command) and
   :class:`ReplayAgent` (the paper's baseline: the steering the expert used at that vertex in the teach drive,
-  and its speed).
+  and its target speed there).
 
 :func:`run_episode` drives one repeat and returns its outcome, path, localization errors and timing.
 """
@@ -45,7 +45,7 @@ def vertex_lane_s(route: DriveRoute, topo: TopometricMap) -> NDArray[np.float64]
         out[k] = s
         if s < route.length_m - 1.0:
             dist.append(abs(lateral))
-    if not dist or float(np.median(dist)) > 5.0:
+    if not dist or float(np.median(dist)) > 2.5:
         raise InputError("map", "the topometric map's vertices do not follow the teach route of this config "
                          "(a map of another route or region)")
     return np.maximum.accumulate(out)
@@ -148,17 +148,16 @@ class ReplayAgent:
 
 def teach_controls(sim: Simulator, expert: Expert, condition: str, seed: int,
                    lane_s: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The expert's teach drive (no noise, no images needed): its steering and speed at every map vertex."""
+    """The expert's teach drive (no noise, no images needed): its steering and target speed at every map vertex."""
     sim.reset(condition, seed)
     expert.reset()
-    s, steer, speed, status = [sim.s], [], [sim.state.v], RUNNING
+    s, steer, speed, status = [], [], [], RUNNING
     while status == RUNNING:
         control = expert.control(sim.state)
-        steer.append(control.steer)
-        _, status = sim.step(control, render=False)
         s.append(sim.s)
-        speed.append(sim.state.v)
-    steer.append(steer[-1])
+        steer.append(control.steer)
+        speed.append(expert.last_target)
+        _, status = sim.step(control, render=False)
     order = np.maximum.accumulate(np.asarray(s))
     return np.interp(lane_s, order, steer), np.interp(lane_s, order, speed)
 
@@ -192,7 +191,8 @@ def run_episode(sim: Simulator, agent: Any, localization: Any, topo: TopometricM
     gain = float(drive["expert"]["speed_gain"])
     obs = sim.reset(condition, seed, lateral, yaw)
     localization.start(rng)
-    every = max(1, int(sim.max_steps // max(strip_frames, 1))) if strip_frames else 0
+    expected = sim.route.length_m / float(drive["expert"]["cruise_mps"]) * sim.spec.control_hz  # steps at cruise speed
+    every = max(1, int(expected // strip_frames)) if strip_frames else 0
     xy, errors, frames, since_sure, slow_steps, lat = [sim.centre], [], [], 0, 0, []
     previous, status = sim.centre, RUNNING
     started = time.perf_counter()
