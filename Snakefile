@@ -34,4 +34,6 @@ onsuccess:
 
 
 onerror:
+    report_failures()
     finish_invocation(os.environ.get(INVOCATION_ENV), "FAILED")
+    close_killed_runs()

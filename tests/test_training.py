@@ -73,7 +73,7 @@ def test_fit_restores_the_best_checkpoint_and_repeats_with_its_seed(tmp_path):
     assert len(snapshots.weights) == 3 and not torch.equal(snapshots.weights[1], snapshots.weights[2])
     assert torch.equal(result.module.layer.weight, snapshots.weights[1])
     assert torch.load(tmp_path / "model.ckpt", weights_only=False)["epoch"] == 1
-    assert not list(tmp_path.glob(".checkpoints-*"))  # the temporary checkpoints are gone
+    assert not list(tmp_path.glob(".topoloc-tmp.*"))  # the temporary checkpoints are gone
     history = result.history
     assert list(history.columns) == ["step", "epoch", "train/loss", "val/loss", "val/acc"]
     assert history["val/loss"].dropna().tolist() == VAL_LOSSES[:3] and history["train/loss"].notna().sum() == 12

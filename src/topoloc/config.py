@@ -55,7 +55,39 @@ def validate_and_fill(config: dict[str, Any], source: str | Path | None = None) 
     if error is not None:
         where, message = _where_and_what(error)
         raise InputError(f"{source}: {where}" if source is not None else where, message)
+    if "odometry" in config:
+        try:
+            check_drives(config["odometry"])
+        except InputError as err:
+            raise InputError(f"{source}: {err.where}" if source is not None else err.where, err.message) from None
     return config
+
+
+#: The keys every drive of ``odometry.drives`` needs, per ``odometry.source`` (the others ignore drives).
+REQUIRED_DRIVE_KEYS = {"kitti_poses": ("poses",), "kitti_stereo": ("sequence",), "simulated": (), "rendered": ()}
+
+
+def check_drives(odometry: Mapping[str, Any]) -> None:
+    """InputError naming the drive and key when a drive lacks what ``odometry.source`` needs.
+
+    A ``kitti_*`` source needs at least one drive, each with its files (:data:`REQUIRED_DRIVE_KEYS`), and
+    either a gps file or ``odometry.origin`` to be placed on the map.
+    """
+    source = odometry["source"]
+    if source not in ("kitti_poses", "kitti_stereo"):
+        return
+    drives = odometry["drives"]
+    if not drives:
+        raise InputError("config key 'odometry.drives'", f"odometry.source {source} needs at least one drive")
+    for name, drive in drives.items():
+        for key in REQUIRED_DRIVE_KEYS[source]:
+            if not drive.get(key):
+                raise InputError(f"config key 'odometry.drives.{name}.{key}'",
+                                 f"drive {name} has no {key}, which odometry.source {source} needs")
+        if not drive.get("gps") and not odometry["origin"]:
+            raise InputError(f"config key 'odometry.drives.{name}.gps'",
+                             f"drive {name} has no gps file and odometry.origin is not set: "
+                             "set one of them to place the drive on the map")
 
 
 def load(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:

@@ -13,7 +13,6 @@ checkpoint: ``best/epoch`` and ``best/<metric>`` for each validation metric at t
 from __future__ import annotations
 
 import shutil
-import tempfile
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -26,7 +25,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from topoloc.io import atomic_path
+from topoloc.io import atomic_path, temporary_dir
 from topoloc.tracking import tracking_uri
 
 #: The metric that picks the checkpoint (and drives early stopping).
@@ -195,13 +194,9 @@ def best_checkpoint(model_path: str | Path) -> Iterator[L.pytorch.callbacks.Mode
 
     The folder is removed when the block ends, however it ends.
     """
-    Path(model_path).parent.mkdir(parents=True, exist_ok=True)
-    ckpt_dir = Path(tempfile.mkdtemp(prefix=".checkpoints-", dir=Path(model_path).parent))
-    try:
+    with temporary_dir(model_path) as ckpt_dir:  # .topoloc-tmp.<model name>.*, see topoloc.io
         yield L.pytorch.callbacks.ModelCheckpoint(dirpath=ckpt_dir, filename="best", monitor=MONITOR, mode="min",
                                                   save_top_k=1)
-    finally:
-        shutil.rmtree(ckpt_dir, ignore_errors=True)
 
 
 def keep_best(checkpoint: L.pytorch.callbacks.ModelCheckpoint, trainer: L.Trainer, model_path: str | Path,
