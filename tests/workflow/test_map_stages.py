@@ -117,6 +117,7 @@ def test_bad_inputs_fail_with_one_line_and_leave_nothing(workflow):
     errors = [line for line in proc.stderr.splitlines() if line.startswith("topoloc: ")]
     assert len(errors) == 1 and errors[0].startswith("topoloc: corrupt.osm: cannot read OSM data (XML parsing error")
     assert errors[0].endswith("(region.osm_file)")
+    assert proc.stderr.rstrip().splitlines()[-1] == errors[0]  # the last line the user sees, printed once
     assert not (root / "results" / "broken" / "osm" / "region.osm").exists()
 
     cases = {

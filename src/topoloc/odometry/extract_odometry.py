@@ -63,9 +63,8 @@ def check_on_map(graph: RoadGraph, xy: np.ndarray, max_offmap_m: float, drive: s
     median = float(np.median(dist))
     if median > max_offmap_m:
         far = f"{median / 1000:,.0f} km" if median >= 10_000 else f"{median:,.0f} m"
-        raise InputError(where, f"drive {drive} lies {far} (median) from the roads of the map, {np.mean(dist <= 5.0):.0%} "
-                                f"of its frames within 5 m (odometry.max_offmap_m {max_offmap_m:g}): a drive of another "
-                                "place than region.*?")
+        raise InputError(where, f"drive {drive} lies {far} (median) from the roads of the map ({np.mean(dist <= 5.0):.0%} "
+                                f"of its frames within 5 m; odometry.max_offmap_m {max_offmap_m:g}): the drive is not in this region")
 
 
 def _georeference(track: np.ndarray, yaw0: float, gps_xy: np.ndarray | None, conf: dict[str, Any], crs: str) -> Georeference:
