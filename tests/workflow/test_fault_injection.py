@@ -3,10 +3,12 @@
 The stage is ``render_drive`` on a 300 m town (the cheapest stage that writes a temporary folder for
 seconds). Moments: (a) the job's process alone while its images are in the temporary folder
 (Snakemake survives and fails the job); (b) the whole process group (Snakemake and the job) at the
-same moment; (c) the whole group after the job has written some of its outputs. Recovery is what the
-README's "When a run was killed" says: the same command, after ``snakemake --unlock`` when Snakemake
-itself was killed. Then: the run completes, no MLflow run is RUNNING, no temporary file or marker is
-left, and the outputs equal those of the uninterrupted run.
+same moment of the recovery run; (c) the whole group after the job of the next recovery has written
+some of its outputs (only ``rerun-incomplete`` of the workflow profile lets the next run go on).
+Recovery is what the README's "When a run was killed" says: the same command, after
+``snakemake --unlock`` when Snakemake itself was killed. Then: the run completes, no MLflow run is
+RUNNING, no temporary file or marker is left, and the outputs equal those of the stage run
+uninterrupted. The kills are chained (each recovery is killed in turn) to keep the test short.
 """
 
 from __future__ import annotations
@@ -14,7 +16,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -22,6 +23,7 @@ import time
 from pathlib import Path
 
 import pytest
+import yaml
 
 from tests.render.conftest import town_osm
 from tests.workflow.conftest import clean_env
@@ -78,6 +80,16 @@ def temporaries(root: Path) -> list[Path]:
     return [p for p in (root / "results").rglob(".topoloc-tmp.*")]
 
 
+def mid_images(root: Path) -> bool:
+    """The job is rendering: its temporary folder holds some images."""
+    return any((root / DRIVE).glob(".topoloc-tmp.image_0.*/image_0/000010.png"))
+
+
+def some_outputs(root: Path) -> bool:
+    """The job has written some of its outputs (not yet all)."""
+    return (root / DRIVE / "calib.txt").exists()
+
+
 def runs(root: Path) -> list:
     from mlflow import MlflowClient
 
@@ -85,55 +97,74 @@ def runs(root: Path) -> list:
     return client.search_runs([client.get_experiment_by_name("topoloc").experiment_id])
 
 
-def test_kill_at_three_moments_and_recover(workflow):
+def reference_render(root: Path, tiny: str, into: Path) -> None:
+    """The drive rendered in this process by the stage's function, uninterrupted, from the graph the workflow built."""
+    from topoloc.config import load
+    from topoloc.render.render_drive import run
+
+    config = load(root / "config" / "config.yaml", yaml.safe_load((root / tiny).read_text()))
+    names = {"left": "image_0", "right": "image_1", "calib": "calib.txt", "poses": "poses.txt", "times": "times.txt",
+             "gps": "gps.csv", "route": "route.csv", "stats": "render.json", "sheet": "contact_sheet.png"}
+    inputs = {"osm": str(root / "results/town/osm/region.osm"), "graph": str(root / "results/town/graph/graph.graphml")}
+    run({**config["render"], "drive": DRIVE.name}, inputs, {k: str(into / DRIVE / v) for k, v in names.items()})
+
+
+def kill_at(root: Path, command: list[str], moment: str, whole_group: bool, reached) -> tuple[int, str]:
+    """Start ``snakemake COMMAND``; at ``moment`` (once ``reached``) SIGKILL the job's process or the whole group."""
+    proc = snakemake(root, *command, new_session=True)
+    wait_for(lambda: list((root / "results" / ".tracking").glob("run-*.json")) and reached(root), proc, f"moment {moment}")
+    owner = process_identity(job_pid(root))
+    if whole_group:
+        os.killpg(proc.pid, signal.SIGKILL)
+        code, err = proc.wait(), ""
+    else:
+        os.kill(owner["pid"], signal.SIGKILL)
+        code, err = finish(proc)
+    deadline = time.monotonic() + 30  # a killed process may take a moment to be torn down
+    while owner_alive(owner) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not owner_alive(owner) and code != 0, moment
+    return code, err
+
+
+def test_kill_at_three_moments_and_recover(workflow, tmp_path):
     root = workflow.root
     town_osm(root / "town.osm")
     tiny = workflow.config("tiny.yaml", "region: {name: town, osm_file: town.osm}\n"
                                         "render: {length_m: 160, sheet: {conditions: [clear_noon], frames: 1}}\n")
     command = [TARGET, "--configfile", tiny]  # no --cores: the workflow profile gives it
 
-    code, err = finish(snakemake(root, *command))
+    # (a) The job's process alone, while its images are in the temporary folder: Snakemake survives, fails the
+    # job, closes its MLflow run as KILLED and ends with the job's line.
+    _, err = kill_at(root, command, "a", False, mid_images)
+    assert err.rstrip().splitlines()[-1] == ("topoloc: rule render_drive (region=town, drive=ren00_clear_noon) stopped "
+                                             "without finishing (killed?); its log: results/town/logs/render_drive_ren00_clear_noon.log")
+    left_by_a = temporaries(root)
+    assert [p.name.split(".")[2] for p in left_by_a] == ["image_0"]  # .topoloc-tmp.image_0.*
+    assert {r.data.tags.get("topoloc.rule", "pipeline"): r.info.status for r in runs(root)}["render_drive"] == "KILLED"
+
+    # (b) Recovery, step 1: the same command; it removes what (a) left, and is itself killed, Snakemake with it.
+    kill_at(root, command, "b", True, mid_images)
+    assert not any(p.exists() for p in left_by_a)
+    # (c) Recovery again (snakemake was killed: --unlock, then the same command), killed after some outputs exist.
+    code, err = finish(snakemake(root, "--unlock"))
     assert code == 0, err
-    reference = fingerprint(root)
-    assert len(reference) > 300  # ~160 stereo pairs and the files beside them
+    assert [r.info.status for r in runs(root) if r.info.status == "RUNNING"] == []  # closed when --unlock started
+    kill_at(root, command, "c", True, some_outputs)
+    assert (root / DRIVE / "calib.txt").exists() and not (root / DRIVE / "render.json").exists()
 
-    mid_images = lambda: any((root / DRIVE.parent).glob(f"{DRIVE.name}/.topoloc-tmp.image_0.*/image_0/000010.png"))  # noqa: E731
-    some_outputs = lambda: (root / DRIVE / "calib.txt").exists()  # noqa: E731
-    for moment, whole_group, reached in (("a", False, mid_images), ("b", True, mid_images), ("c", True, some_outputs)):
-        shutil.rmtree(root / DRIVE)  # as on a first run: the drive is to be rendered
-        before = {r.info.run_id for r in runs(root)}
-        proc = snakemake(root, *command, new_session=True)
-        wait_for(lambda: list((root / "results" / ".tracking").glob("run-*.json")) and reached(), proc, f"moment {moment}")
-        pid = job_pid(root)
-        if whole_group:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-        else:
-            os.kill(pid, signal.SIGKILL)
-            code, err = finish(proc)
-            assert code != 0
-            last = err.rstrip().splitlines()[-1]
-            assert last.startswith("topoloc: rule render_drive (region=town, drive=ren00_clear_noon) stopped without finishing"), err[-2000:]
-        owner = process_identity(pid)
-        deadline = time.monotonic() + 30  # a killed process may take a moment to be torn down
-        while owner_alive(owner) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert not owner_alive(owner), moment
-        assert temporaries(root) or moment == "c"  # what a killed job leaves behind
+    code, err = finish(snakemake(root, "--unlock"))
+    assert code == 0, err
+    code, err = finish(snakemake(root, *command))
+    assert code == 0, err[-3000:]
 
-        if whole_group:  # the README's recovery: unlock (without --cores), then the same command
-            code, err = finish(snakemake(root, "--unlock"))
-            assert code == 0, err
-        code, err = finish(snakemake(root, *command))
-        assert code == 0, f"moment {moment}: {err[-3000:]}"
-
-        assert fingerprint(root) == reference, moment
-        assert temporaries(root) == [], moment
-        assert sorted(p.name for p in (root / "results" / ".tracking").iterdir()) == ["lock"], moment
-        now = runs(root)
-        assert [r.info.run_name for r in now if r.info.status == "RUNNING"] == [], moment
-        new_runs = [r for r in now if r.info.run_id not in before]
-        killed = sorted(r.data.tags.get("topoloc.rule", "pipeline") for r in new_runs if r.info.status == "KILLED")
-        assert killed == (["pipeline", "render_drive"] if whole_group else ["render_drive"]), moment
-        assert all("gone; found at" in r.data.tags["topoloc.killed"] for r in new_runs if r.info.status == "KILLED")
-        assert any(r.info.status == "FINISHED" and r.data.tags.get("topoloc.rule") == "render_drive" for r in new_runs)
+    reference_render(root, tiny, tmp_path / "reference")
+    expected = fingerprint(tmp_path / "reference")
+    assert len(expected) > 300 and fingerprint(root) == expected  # ~160 stereo pairs and the files beside them
+    assert temporaries(root) == []
+    assert sorted(p.name for p in (root / "results" / ".tracking").iterdir()) == ["lock"]
+    statuses = sorted((r.data.tags.get("topoloc.rule", "pipeline"), r.info.status) for r in runs(root))
+    assert [s for s in statuses if s[0] == "render_drive"] == [("render_drive", "FINISHED")] + [("render_drive", "KILLED")] * 3
+    assert [s for s in statuses if s[0] == "pipeline"] == [("pipeline", "FAILED"), ("pipeline", "FINISHED")] + [
+        ("pipeline", "KILLED")] * 2
+    assert all("gone; found at" in r.data.tags["topoloc.killed"] for r in runs(root) if r.info.status == "KILLED")
