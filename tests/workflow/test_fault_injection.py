@@ -51,7 +51,7 @@ def fingerprint(root: Path) -> dict[str, str]:
     """sha256 of every output of the drive (render.json without its timings)."""
     prints = {}
     for path in sorted((root / DRIVE).rglob("*")):
-        if path.is_file():
+        if path.is_file() and path.name != ".snakemake_timestamp":  # Snakemake's mark in directory outputs
             data = path.read_bytes()
             if path.name == "render.json":
                 data = json.dumps({k: v for k, v in json.loads(data).items() if k not in TIMING_KEYS}, sort_keys=True).encode()
@@ -131,7 +131,7 @@ def test_kill_at_three_moments_and_recover(workflow, tmp_path):
     root = workflow.root
     town_osm(root / "town.osm")
     tiny = workflow.config("tiny.yaml", "region: {name: town, osm_file: town.osm}\n"
-                                        "render: {length_m: 160, sheet: {conditions: [clear_noon], frames: 1}}\n")
+                                        "render: {length_m: 100, sheet: {conditions: [clear_noon], frames: 1}}\n")
     command = [TARGET, "--configfile", tiny]  # no --cores: the workflow profile gives it
 
     # (a) The job's process alone, while its images are in the temporary folder: Snakemake survives, fails the
@@ -160,7 +160,7 @@ def test_kill_at_three_moments_and_recover(workflow, tmp_path):
 
     reference_render(root, tiny, tmp_path / "reference")
     expected = fingerprint(tmp_path / "reference")
-    assert len(expected) > 300 and fingerprint(root) == expected  # ~160 stereo pairs and the files beside them
+    assert len(expected) > 200 and fingerprint(root) == expected  # ~110 stereo pairs and the files beside them
     assert temporaries(root) == []
     assert sorted(p.name for p in (root / "results" / ".tracking").iterdir()) == ["lock"]
     statuses = sorted((r.data.tags.get("topoloc.rule", "pipeline"), r.info.status) for r in runs(root))
