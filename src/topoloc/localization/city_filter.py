@@ -29,13 +29,16 @@ from numpy.typing import NDArray
 from topoloc.localization.metric import MetricModel, MetricSettings, concentration, resultant_length
 from topoloc.localization.metric_filter import COMPLEX, REAL, TINY, Estimate, MetricFilter
 
+#: The coarse model's heading spread and turn spread, as multiples of the fine model's.
+COARSE_SPREAD = 2.0
+
 
 def coarse_settings(settings: MetricSettings) -> MetricSettings:
     """The settings of the coarse model that goes with ``settings`` (see the module docstring)."""
     k = settings.coarse_factor
     return dataclasses.replace(settings, cell_m=settings.cell_m * k, step_jitter=settings.step_jitter / k,
-                               heading_sigma_deg=2.0 * settings.heading_sigma_deg,
-                               turn_sigma_share=2.0 * settings.turn_sigma_share, scale_classes=1, coarse_factor=1)
+                               heading_sigma_deg=COARSE_SPREAD * settings.heading_sigma_deg,
+                               turn_sigma_share=COARSE_SPREAD * settings.turn_sigma_share, scale_classes=1, coarse_factor=1)
 
 
 def uses_coarse(settings: MetricSettings, fine_cells: int) -> bool:
