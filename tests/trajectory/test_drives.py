@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from trajectory_helpers import random_graph
@@ -19,7 +21,7 @@ from topoloc.trajectory.evaluate_rnn import (
     driven_metres,
     prefix_majority,
 )
-from topoloc.trajectory.generate_dataset import generate
+from topoloc.trajectory.generate_dataset import generate, run
 from topoloc.trajectory.model import TrajectoryRNN, predict
 from topoloc.trajectory.train_rnn import fit
 
@@ -74,9 +76,15 @@ def test_training_drives_have_the_token_statistics_of_test_drives():
 
 def test_dataset_files_of_simulated_drives(tmp_path):
     graph = random_graph(3, n=14, extra=8)
-    stats = generate(graph, drive_conf(drives=20, crop_m=100.0), str(tmp_path / "t.parquet"), str(tmp_path / "v.parquet"))
-    assert stats["trajectories"] == 20 == stats["train_trajectories"] + stats["val_trajectories"]
+    graph.save_graphml(tmp_path / "graph.graphml")
+    outputs = {"train": str(tmp_path / "t.parquet"), "val": str(tmp_path / "v.parquet"),
+               "stats": str(tmp_path / "stats.json"), "table": str(tmp_path / "table_i.md")}
+    metrics = run(drive_conf(drives=20, crop_m=100.0), {"graph": str(tmp_path / "graph.graphml")}, outputs)
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert stats["trajectories"] == 20 == stats["train_trajectories"] + stats["val_trajectories"] == metrics["trajectories"]
     assert stats["feature_dim"] == 3 and stats["source"] == "simulated_drives"
+    assert all(isinstance(v, float) for v in metrics.values())  # MLflow metrics: numbers only
+    assert "tokens + 3 continuous features" in (tmp_path / "table_i.md").read_text()
     tokens, labels = load_sequences(tmp_path / "t.parquet")
     features = load_features(tmp_path / "t.parquet", 3)
     assert [len(f) for f in features] == [len(t) for t in tokens] == [len(x) for x in labels]

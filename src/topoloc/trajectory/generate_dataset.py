@@ -185,4 +185,4 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     log.info("dataset: %s", stats)
     write_json(outputs["stats"], stats)
     write_text(outputs["table"], table_i(stats, conf.get("region", "")))
-    return {k: float(v) for k, v in stats.items()}
+    return {k: float(v) for k, v in stats.items() if isinstance(v, (int, float))}
