@@ -54,6 +54,7 @@ def test_without_evidence_it_is_the_hmm_and_with_it_it_follows_the_rnn(setting):
     hmm.reset(road, conf)
     base = hmm.run([t for t, _ in obs.items])
     assert track.state.tolist() == base.state.tolist() and track.path.tolist() == base.path.tolist()
+    assert learned.explained(obs.items) == hmm.explained([t for t, _ in obs.items])
     # a model sure of road 7 whatever it sees: with full weight the filter ends there, the HMM elsewhere
     sure = TrajectoryRNN(20, graph.num_edges, cell="lstm", hidden_size=16, embedding_dim=8, feature_dim=3).eval()
     with torch.no_grad():

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from topoloc.errors import InputError
+from topoloc.geometry import straight_token
 from topoloc.localization.hmm import CellHMM, HmmParams
 from topoloc.localization.rnn import OnlineRNN
 from topoloc.localization.roadmap import (
@@ -83,6 +84,12 @@ class RnnFilter(RoadLocalizer):
             return None
         cells, _ = self.hmm.trace()
         return self.hmm.cell_edge[cells]
+
+    def explained(self, items: list[Any]) -> tuple[float, int]:
+        """Share of the turn tokens that the map's turn along the Viterbi path matches, and their number."""
+        cells, _ = self.hmm.trace()
+        tokens = np.asarray([i[0] if isinstance(i, tuple) else i for i in items], np.int64)
+        return self.hmm.explained_turns(tokens, cells), int(np.sum(tokens[1:] != straight_token(self.bins)))
 
     def summary(self) -> dict[str, Any]:
         if not self.hmm.back:
