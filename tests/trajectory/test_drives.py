@@ -122,18 +122,24 @@ def test_feature_model_round_trips_through_mlflow(tmp_path, monkeypatch):
     import torch
 
     from topoloc.training import LoggedModel, log_model
-    from topoloc.trajectory.model import load_model
+    from topoloc.trajectory.model import load_model, log_checkpoint
     from topoloc.trajectory.train_rnn import signature_example
 
     uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
     monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
     mlflow.set_tracking_uri(uri)
-    torch.manual_seed(0)
-    model = TrajectoryRNN(20, 9, cell="lstm", hidden_size=16, embedding_dim=8, feature_dim=3).eval()
+    graph = random_graph(3, n=14, extra=8)
+    conf = drive_conf(drives=12)
+    stats = generate(graph, conf, str(tmp_path / "t.parquet"), str(tmp_path / "v.parquet"))
+    model, _, _ = fit(conf, str(tmp_path / "t.parquet"), str(tmp_path / "v.parquet"), graph.num_edges,
+                      str(tmp_path / "model.ckpt"), fast_dev_run=True, feature_dim=stats["feature_dim"])
+    model = model.eval()
     with mlflow.start_run() as run:
         log_model(model, LoggedModel(signature_example(20), free_axes=2))
+        log_checkpoint(tmp_path / "model.ckpt")
     loaded = load_model(f"runs:/{run.info.run_id}/model", tracking_uri=uri)
-    tokens = [np.array([10, 10, 3, 10, 17]), np.array([10, 5])]
+    assert isinstance(loaded, TrajectoryRNN) and load_model(run.info.run_id, tracking_uri=uri).hparams == loaded.hparams
+    tokens = [np.array([10, 10, 3, 10, 17]), np.array([10, 5])]  # drive-like token sequences
     inputs = [np.random.default_rng(1).normal(size=(len(t), 3)).astype(np.float32) for t in tokens]
     assert int(loaded.hparams.feature_dim) == 3
     with torch.no_grad():

@@ -34,6 +34,7 @@ from topoloc.tracking import tracking_uri as default_uri
 from topoloc.trajectory.dataset import MAX_OFFSET, load_features, load_sequences, load_state_targets
 
 IGNORE = -100
+CHECKPOINT_ARTIFACT = "checkpoint"
 CELLS = {"rnn": nn.RNN, "gru": nn.GRU, "lstm": nn.LSTM}
 SCHEDULES = ("constant", "onecycle", "plateau")
 
@@ -280,6 +281,7 @@ def load_model(spec: str, tracking_uri: str | None = None) -> Any:
             raise InputError(spec, f"not a trajectory RNN checkpoint ({type(err).__name__}: {str(err).splitlines()[0][:120]})") from err
     uri = spec if "://" in spec or spec.startswith(("runs:/", "models:/")) else f"runs:/{spec}/model"
     import mlflow  # only for run ids and model URIs: MLflow is slow to import
+    import mlflow.artifacts
 
     store = tracking_uri or default_uri()
     if store.startswith("sqlite:///"):
@@ -287,9 +289,29 @@ def load_model(spec: str, tracking_uri: str | None = None) -> Any:
         if not db.is_file():
             raise InputError(spec, f"no MLflow store at {db} to look up the run id in (set --tracking-uri or MLFLOW_TRACKING_URI)")
     mlflow.set_tracking_uri(store)
+    if uri.startswith("runs:/"):  # the Lightning checkpoint the stage logged beside the model (log_checkpoint)
+        run_id = uri[len("runs:/"):].split("/")[0]
+        try:
+            local = mlflow.artifacts.download_artifacts(run_id=run_id, artifact_path=f"{CHECKPOINT_ARTIFACT}/model.ckpt")
+        except Exception:  # no such run or no checkpoint artifact: try the logged model below
+            local = None
+        if local is not None:
+            return TrajectoryRNN.load_from_checkpoint(local, map_location="cpu").eval()
     try:
         model = mlflow.pytorch.load_model(uri, map_location="cpu")
     except Exception as err:  # MlflowException and OSError for unknown runs, models and artifacts
         first = str(err).splitlines()[0][:160] if str(err) else type(err).__name__
         raise InputError(spec, f"no trajectory model at {uri} in the MLflow store {store.split('?')[0]} ({first})") from err
+    if not isinstance(model, TrajectoryRNN):  # recent MLflow logs an exported graph: no hyper-parameters, no states
+        raise InputError(spec, f"{uri} is a {type(model).__name__}, not the trajectory RNN: load its run's checkpoint "
+                               f"({CHECKPOINT_ARTIFACT}/model.ckpt) or the stage's model.ckpt")
     return model.eval()
+
+
+def log_checkpoint(path: str | Path) -> None:
+    """Attach the checkpoint ``path`` to the active MLflow run as ``checkpoint/model.ckpt``, what
+    :func:`load_model` of a run id loads (the MLflow model alone may be an exported graph without the
+    hyper-parameters and recurrent states the localizers need)."""
+    import mlflow
+
+    mlflow.log_artifact(str(path), CHECKPOINT_ARTIFACT)

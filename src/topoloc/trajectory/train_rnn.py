@@ -21,7 +21,7 @@ from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json
 from topoloc.training import FitSettings, LoggedModel
 from topoloc.training import fit as fit_module
-from topoloc.trajectory.model import TrajectoryData, TrajectoryRNN
+from topoloc.trajectory.model import TrajectoryData, TrajectoryRNN, log_checkpoint
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +78,13 @@ def fit(conf: dict[str, Any], train_path: str, val_path: str, num_edges: int, mo
     return result.module, result.history, metrics
 
 
+def mlflow_active() -> bool:
+    """Whether an MLflow run is active (the stage's)."""
+    import mlflow
+
+    return mlflow.active_run() is not None
+
+
 def signature_example(bins: int) -> np.ndarray:
     """Two token sequences ``(2, 6)`` int64 for the logged model's signature: straight on, and one turn."""
     return np.array([[bins // 2] * 6, [bins // 2, bins // 2, 3, bins // 2, bins // 2, bins // 2]], dtype=np.int64)
@@ -88,6 +95,8 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     stats = json.loads(Path(inputs["stats"]).read_text())
     _, history, metrics = fit(conf, inputs["train"], inputs["val"], int(stats["classes"]), outputs["model"],
                               log_model=conf["train"]["log_model"], feature_dim=int(stats.get("feature_dim", 0)))
+    if conf["train"]["log_model"] and mlflow_active():
+        log_checkpoint(outputs["model"])
     with atomic_path(outputs["history"]) as tmp:
         history.to_csv(tmp, index=False)
     write_json(outputs["metrics"], metrics)
