@@ -282,6 +282,7 @@ def load_model(spec: str, tracking_uri: str | None = None) -> Any:
     uri = spec if "://" in spec or spec.startswith(("runs:/", "models:/")) else f"runs:/{spec}/model"
     import mlflow  # only for run ids and model URIs: MLflow is slow to import
     import mlflow.artifacts
+    import mlflow.exceptions
 
     store = tracking_uri or default_uri()
     if store.startswith("sqlite:///"):
@@ -293,7 +294,7 @@ def load_model(spec: str, tracking_uri: str | None = None) -> Any:
         run_id = uri[len("runs:/"):].split("/")[0]
         try:
             local = mlflow.artifacts.download_artifacts(run_id=run_id, artifact_path=f"{CHECKPOINT_ARTIFACT}/model.ckpt")
-        except Exception:  # no such run or no checkpoint artifact: try the logged model below
+        except (mlflow.exceptions.MlflowException, OSError):  # no such run or no checkpoint: try the logged model
             local = None
         if local is not None:
             return TrajectoryRNN.load_from_checkpoint(local, map_location="cpu").eval()
