@@ -65,6 +65,8 @@ def workflow(tmp_path) -> Workflow:
     config["odometry"]["simulated"]["drives"] = 1
     config["render"].update(length_m=120, sheet={"conditions": ["clear_noon", "night"], "frames": 2})
     config["dataset"]["max_paths_total"] = 2000
+    config["dataset"]["simulated"] = {"drives": 40, "length_m": [300, 600]}
+    config["train"]["log_every_n_steps"] = 1  # 32 training drives make one step per epoch: log every step
     config["train"].update(max_epochs=2, max_time_min=0.5)
     place = config["place"]
     place["image"].update(width=64, height=48)

@@ -137,9 +137,10 @@ def odometry_inputs(wildcards):
 
 
 def dataset_conf():
-    """Config slice of generate_dataset: segmentation only when training paths are segmented like drives."""
+    """Config slice of generate_dataset: segmentation only when training paths are segmented like drives
+    (simulated drives always are)."""
     conf = {"encoding": config["encoding"], "dataset": config["dataset"], "region": config["region"]["name"]}
-    if config["dataset"]["encoding"] == "douglas_peucker":
+    if config["dataset"]["encoding"] == "douglas_peucker" or config["dataset"]["source"] == "simulated_drives":
         conf["segmentation"] = config["segmentation"]
     return conf
 

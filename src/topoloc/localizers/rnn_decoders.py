@@ -39,7 +39,12 @@ class _RnnLocalizer(RoadLocalizer):
         self.bins = int(map.model.hparams.bins)
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
-        return token_observations(odometry, map, conf, int(map.model.hparams.bins))
+        """The drive's tokens; ``(token, features)`` pairs for a model trained with continuous features."""
+        obs = token_observations(odometry, map, conf, int(map.model.hparams.bins))
+        if not int(map.model.hparams.get("feature_dim", 0)):
+            return obs
+        items = [(int(t), f) for t, f in zip(obs.items, obs.extra["features"])]
+        return Observations(items, obs.frame, obs.extra)
 
     def start(self) -> None:
         self.rnn.start()
@@ -48,10 +53,11 @@ class _RnnLocalizer(RoadLocalizer):
     def answer(self) -> Answer:
         return self._answer
 
-    def _logp(self, token: int) -> np.ndarray:
+    def _logp(self, observation: Any) -> np.ndarray:
+        token, inputs = observation if isinstance(observation, tuple) else (observation, None)
         if not 0 <= int(token) < self.bins:
             raise InputError("tokens", f"tokens must lie in [0, {self.bins}) for this model, got {token}")
-        return self.rnn.step(int(token))
+        return self.rnn.step(int(token), inputs)
 
 
 @register
