@@ -73,3 +73,16 @@ def test_a_failing_stage_marks_its_run_failed(store):
     assert "MLFLOW_TRACKING_URI" not in os.environ  # the run does not leak its store to later code
     markers = list((store / "results" / ".tracking").glob("invocation-*.json"))
     assert len(markers) == 1 and json.loads(markers[0].read_text())["run_id"]
+
+
+def test_the_default_store_uses_write_ahead_logging(store):
+    """Parallel jobs write while others read: the SQLite store is switched to WAL once, by the first client."""
+    import sqlite3
+
+    with tracking.StageRun("exp", "one", {}, {"k": 1}) as run:
+        run.log_metrics({"m": 1.0})
+    connection = sqlite3.connect(store / "results" / "mlflow.db")
+    try:
+        assert connection.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    finally:
+        connection.close()
