@@ -39,11 +39,11 @@ def workflow_rules() -> dict[str, bool]:
     """The rules of ``workflow/rules/*.smk``, each with whether it sets its threads from the config."""
     rules = {}
     for path in sorted((REPO / "workflow" / "rules").glob("*.smk")):
-        blocks = re.split(r"^(?=(?:rule|checkpoint) \w+:)", path.read_text(), flags=re.MULTILINE)
+        blocks = re.split(r"^(?=\s*(?:rule|checkpoint) \w+:)", path.read_text(), flags=re.MULTILINE)
         for text in blocks:
-            name = re.match(r"(?:rule|checkpoint) (\w+):", text)
+            name = re.match(r"\s*(?:rule|checkpoint) (\w+):", text)
             if name:
-                rules[name.group(1)] = bool(re.search(r"^    threads: config\[", text, flags=re.MULTILINE))
+                rules[name.group(1)] = bool(re.search(r"^\s+threads: config\[", text, flags=re.MULTILINE))
     return rules
 
 
