@@ -6,9 +6,11 @@
 #   cluster/slurm_local.sh stop [DIR]    # stops the three daemons started by `start`
 #
 # Needs Debian's slurm-wlm and munge (apt-get install slurm-wlm munge) and root (the daemons run as root, the
-# munge daemon as user munge). No accounting database: sacct reads the jobs from slurmctld, which keeps
+# munge daemon as user munge); /etc/slurm/slurm.conf links to DIR/slurm.conf while it runs (srun inside a
+# job reads that path). No accounting database: sacct reads the jobs from slurmctld, which keeps
 # finished jobs for MinJobAge (a day); every finished job is also appended to DIR/jobcomp.txt.
-# CPUS and MEM_MB (environment) size the node: default all cores and 3/4 of the memory.
+# CPUS and MEM_MB (environment) size the node: default all cores and 3/4 of the memory; SLURMCTLD_PORT and
+# SLURMD_PORT (default 6817, 6818) its ports.
 set -euo pipefail
 
 command=${1:-}
@@ -16,6 +18,10 @@ dir=$(realpath -m "${2:-/tmp/topoloc-slurm}")
 conf="$dir/slurm.conf"
 
 stop() {
+    # the link start made (srun inside a job reads the default path, not SLURM_CONF)
+    if [[ -L /etc/slurm/slurm.conf && "$(readlink /etc/slurm/slurm.conf)" == "$conf" ]]; then
+        rm -f /etc/slurm/slurm.conf
+    fi
     for name in slurmd slurmctld munged; do
         if [[ -f "$dir/$name.pid" ]]; then
             pid=$(cat "$dir/$name.pid")
@@ -50,8 +56,8 @@ SlurmdUser=root
 AuthType=auth/munge
 AuthInfo=socket=$dir/munge-socket/munge.socket
 CredType=cred/munge
-SlurmctldPort=6817
-SlurmdPort=6818
+SlurmctldPort=${SLURMCTLD_PORT:-6817}
+SlurmdPort=${SLURMD_PORT:-6818}
 StateSaveLocation=$dir/state
 SlurmdSpoolDir=$dir/spool
 SlurmctldPidFile=$dir/slurmctld.pid
@@ -74,6 +80,12 @@ SlurmdTimeout=300
 NodeName=$host CPUs=$cpus RealMemory=$mem State=UNKNOWN
 PartitionName=main Nodes=ALL Default=YES MaxTime=INFINITE State=UP
 EOF
+    mkdir -p /etc/slurm
+    if [[ -e /etc/slurm/slurm.conf && ! -L /etc/slurm/slurm.conf ]]; then
+        echo "slurm_local.sh: /etc/slurm/slurm.conf exists: a Slurm is configured on this machine already" >&2
+        exit 2
+    fi
+    ln -sfn "$conf" /etc/slurm/slurm.conf
     runuser -u munge -- munged --socket="$dir/munge-socket/munge.socket" --key-file="$dir/munge/munge.key" \
         --pid-file="$dir/munge/munged.pid" --log-file="$dir/munge/munged.log" --seed-file="$dir/munge/munged.seed"
     cp "$dir/munge/munged.pid" "$dir/munged.pid"

@@ -19,7 +19,7 @@ def _measure_resources():
 
 def test_every_rule_has_measured_resources_in_both_profiles():
     rules = set(_measure_resources().workflow_rules()) - {"all"}
-    assert {"build_graph", "train_rnn", "train_retrieval"} <= rules
+    assert {"build_graph", "train_rnn", "train_retrieval", "summarize_regions"} <= rules
     for name in ("slurm", "slurm-gpu"):
         profile = yaml.safe_load((REPO / "profiles" / name / "config.yaml").read_text())
         assert profile["executor"] == "slurm"
