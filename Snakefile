@@ -20,6 +20,8 @@ include: "workflow/rules/segment_trajectory.smk"
 include: "workflow/rules/trajectory.smk"
 include: "workflow/rules/place.smk"
 include: "workflow/rules/localization.smk"
+include: "workflow/rules/common_regions.smk"
+include: "workflow/rules/regions.smk"
 
 
 rule all:
@@ -27,6 +29,7 @@ rule all:
     input:
         all_outputs(),
         expand(rules.report_html.output, region=REGION),
+        region_targets(),
 
 
 onsuccess:

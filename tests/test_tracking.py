@@ -120,3 +120,16 @@ def test_a_reused_pid_is_not_taken_for_the_owner():
     assert tracking.owner_alive(me)
     assert not tracking.owner_alive({**me, "started": "0"})  # same pid, another start time
     assert tracking.owner_alive({**me, "host": "elsewhere"})  # another host cannot be checked: left alone
+
+
+def test_the_default_store_uses_write_ahead_logging(store):
+    """Parallel jobs write while others read: the SQLite store is switched to WAL once, by the first client."""
+    import sqlite3
+
+    with tracking.StageRun("exp", "one", {}, {"k": 1}) as run:
+        run.log_metrics({"m": 1.0})
+    connection = sqlite3.connect(store / "results" / "mlflow.db")
+    try:
+        assert connection.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    finally:
+        connection.close()

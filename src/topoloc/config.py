@@ -112,6 +112,40 @@ def load(path: str | Path | None = None, overrides: Mapping[str, Any] | None = N
     return validate_and_fill(data, path)
 
 
+def region_configs(config: Mapping[str, Any], base_dir: str | Path = ".") -> dict[str, dict[str, Any]]:
+    """The config of each region of ``config['regions']`` by name (empty when it names none).
+
+    An entry is a config file (relative to ``base_dir``) or a mapping; either is merged onto ``config`` without
+    its ``regions`` key, then filled and validated. InputError with one line naming the entry, the file or the
+    key: a file that cannot be read, a region named twice, a region config that names regions itself.
+    """
+    base = {k: v for k, v in config.items() if k != "regions"}
+    configs: dict[str, dict[str, Any]] = {}
+    for index, entry in enumerate(config.get("regions") or []):
+        where = f"regions.{index}"
+        if isinstance(entry, str):
+            path = Path(base_dir) / entry
+            try:
+                data = yaml.safe_load(path.read_text()) or {}
+            except OSError as err:
+                raise InputError(f"{where}: {entry}", f"cannot read the region's config file ({err.strerror})") from err
+            except yaml.YAMLError as err:
+                raise InputError(f"{where}: {entry}", f"not a YAML file ({str(err).splitlines()[0]})") from err
+            if not isinstance(data, dict):
+                raise InputError(f"{where}: {entry}", "a config file is a YAML mapping")
+            where = f"{where} ({entry})"
+        else:
+            data = entry
+        if data.get("regions"):
+            raise InputError(where, "a region's config cannot name regions itself")
+        merged = validate_and_fill(deep_merge(base, {k: v for k, v in data.items() if k != "regions"}), where)
+        name = merged["region"]["name"]
+        if name in configs:
+            raise InputError(where, f"region {name!r} is named twice in regions")
+        configs[name] = merged
+    return configs
+
+
 def dotted_overrides(items: list[str]) -> dict[str, Any]:
     """Overrides for :func:`load` from ``SECTION.KEY=VALUE`` strings (values are YAML: 20, 0.01, gru, null)."""
     overrides: dict[str, Any] = {}

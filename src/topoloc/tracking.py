@@ -15,9 +15,10 @@ Snakefile calls :func:`close_stale_runs` when the workflow starts (and in ``oner
 process is gone are closed as KILLED, tagged with the time they were found, and their markers removed.
 
 The default store is SQLite at ``results/mlflow.db`` with artifacts in
-``results/mlartifacts``; ``MLFLOW_TRACKING_URI`` points elsewhere. Writers wait
-on SQLite's lock (``timeout``) instead of failing, and store creation is
-serialized, so parallel jobs are safe.
+``results/mlartifacts``; ``MLFLOW_TRACKING_URI`` points elsewhere (a shared
+``mlflow server``). Writers wait on SQLite's lock (``timeout``) instead of
+failing, store creation is serialized, and the store is switched to WAL
+journaling (readers do not block the writer), so parallel jobs are safe.
 
 MLflow is imported lazily: the Snakefile imports this module on every call,
 including dry runs and no-op reruns, which must stay fast.
@@ -29,11 +30,12 @@ import fcntl
 import json
 import os
 import socket
+import sqlite3
 import subprocess
 import time
 import uuid
 from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from contextlib import closing, contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -90,7 +92,16 @@ def _client() -> MlflowClient:
     with _locked():  # the first client of a new SQLite store runs its migrations
         client = MlflowClient(tracking_uri())
         client.search_experiments(max_results=1)
+        if tracking_uri() == default_tracking_uri():
+            _use_wal(RESULTS_DIR / "mlflow.db")
     return client
+
+
+def _use_wal(db: Path) -> None:
+    """Switch the SQLite store to write-ahead logging (kept in the file; a no-op once done)."""
+    with closing(sqlite3.connect(db, timeout=_SQLITE_TIMEOUT_S)) as connection:
+        if connection.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
+            connection.execute("PRAGMA journal_mode=WAL")
 
 
 def _experiment_id(client: MlflowClient, name: str) -> str:

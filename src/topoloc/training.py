@@ -6,12 +6,19 @@ opened by :mod:`topoloc.stage`) through Lightning's MLFlowLogger, writes the bes
 output, restores it, and logs it to MLflow as a PyTorch model with its signature.
 
 Metric names follow Lightning's style: ``train/loss``, ``val/loss``, ``val/acc``, ... (logged by the modules).
-A fit's summary metrics are ``train_seconds``, ``epochs``, ``steps``, ``parameters``, and those of the kept
-checkpoint: ``best/epoch`` and ``best/<metric>`` for each validation metric at that epoch (``best/val/loss``, ...).
+A fit's summary metrics are ``train_seconds``, ``epochs``, ``steps``, ``parameters``, ``time_capped`` and those
+of the kept checkpoint: ``best/epoch`` and ``best/<metric>`` for each validation metric at that epoch
+(``best/val/loss``, ...).
+
+Reproducibility: a fit is bounded by ``max_epochs`` (and early stopping on ``val/loss``), never by the clock, so
+the same config and seed give the same model on a quiet or a busy machine, only later on the busy one.
+``max_time_min`` is a safety cap only: when it stops a fit, ``time_capped`` is 1 and a warning names the epochs
+done, since the model then depends on the machine's speed.
 """
 
 from __future__ import annotations
 
+import logging
 import shutil
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -34,6 +41,8 @@ TRAIN_LOSS = "train/loss"
 VAL_PREFIX = "val/"
 
 Module = TypeVar("Module", bound=L.LightningModule)
+
+log = logging.getLogger(__name__)
 
 
 class History(L.Callback):
@@ -142,14 +151,28 @@ def fit(build: Callable[[], Module], data: L.LightningDataModule, settings: FitS
         started = time.perf_counter()
         trainer.fit(module, datamodule=data)
         seconds = time.perf_counter() - started
+        capped = time_capped(trainer)
         module = keep_best(checkpoint, trainer, model_path, module)
+    if capped:
+        log.warning("training stopped by the safety cap max_time_min=%s after %d of max_epochs=%d epochs (%d steps): "
+                    "the model depends on the machine's speed; raise max_time_min or lower max_epochs",
+                    settings.max_time_min, trainer.current_epoch, settings.max_epochs, trainer.global_step)
     frame = history.frame()
     metrics = {"train_seconds": seconds, "epochs": float(trainer.current_epoch), "steps": float(trainer.global_step),
-               "parameters": float(sum(p.numel() for p in module.parameters()))}
+               "parameters": float(sum(p.numel() for p in module.parameters())), "time_capped": float(capped)}
     metrics |= best_metrics(frame)
     if run_logger is not None and logged_model is not None:
         log_model(module, logged_model)
     return FitResult(module, frame, metrics)
+
+
+def time_capped(trainer: L.Trainer) -> bool:
+    """Whether the wall-clock cap (Lightning's :class:`~lightning.pytorch.callbacks.Timer`) stopped the fit."""
+    for callback in trainer.callbacks:
+        if isinstance(callback, L.pytorch.callbacks.Timer):
+            remaining = callback.time_remaining()
+            return remaining is not None and remaining <= 0
+    return False
 
 
 def best_metrics(history: pd.DataFrame) -> dict[str, float]:

@@ -1,6 +1,7 @@
 # Shared helpers: config validation, result paths, code digests, MLflow invocation id.
 import atexit
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -34,7 +35,7 @@ if REGION_SOURCE == "osm_file" and not str(config["region"]["osm_file"]).startsw
         _fail(f"{config['region']['osm_file']}: OSM file not found (region.osm_file)")
 
 wildcard_constraints:
-    region=r"[A-Za-z0-9][A-Za-z0-9_.-]*",
+    region=re.escape(REGION),  # exactly this config's region: further regions are modules of their own (regions.smk)
 
 # One id per `snakemake` call; jobs inherit it and hang their MLflow runs under one parent.
 os.environ.setdefault(INVOCATION_ENV, new_invocation_id())

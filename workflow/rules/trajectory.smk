@@ -41,7 +41,7 @@ rule train_rnn:
         "results/{region}/logs/train_rnn.log",
     benchmark:
         "results/{region}/benchmarks/train_rnn.tsv"
-    threads: workflow.cores
+    threads: lambda wildcards: workflow.cores  # evaluated per job: a cluster profile sets it (set-threads)
     script:
         "../scripts/train_rnn.py"
 
