@@ -7,14 +7,13 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.collections import LineCollection  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import LineCollection
 
-from topoloc.geometry import point_along  # noqa: E402
-from topoloc.graph.road_graph import RoadGraph  # noqa: E402
-from topoloc.io import atomic_path  # noqa: E402
-
+from topoloc.geometry import point_along
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.io import atomic_path
 
 #: Above this many roads the map is drawn as a city (see :func:`plot_road_graph`).
 CITY_EDGES = 3000
