@@ -11,7 +11,7 @@ from topoloc.config import load, region_configs
 from topoloc.errors import InputError
 from topoloc.localization.summarize_regions import run as summarize
 
-KITTI = "region: {name: k00, osm_file: map.osm}\nodometry:\n  source: kitti_poses\n  drives: {gt: {poses: p.txt}}\n"
+KITTI = "region: {name: k00, osm_file: map.osm}\nodometry:\n  source: kitti_poses\n  drives: {gt: {poses: p.txt, gps: g.csv}}\n"
 
 
 def test_each_region_is_its_file_or_mapping_merged_onto_the_config(tmp_path):
