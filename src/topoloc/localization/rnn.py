@@ -19,6 +19,16 @@ from numpy.typing import NDArray
 from topoloc.errors import InputError
 
 
+def check_model(map: Any, localizer: str) -> None:
+    """Refuse a missing trajectory model, or one trained on a map with another number of roads (one line)."""
+    if map.model is None:
+        raise InputError("model", f"the {localizer} localizer needs a trained trajectory model")
+    num_edges = int(map.model.hparams.num_edges)
+    if num_edges != map.graph.num_edges:
+        raise InputError("model", f"the model predicts {num_edges} edge classes but the graph has {map.graph.num_edges} "
+                                  "edges: a model trained on another map?")
+
+
 def window_plan(steps: int, window: int | None, stride: int | None) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """Window start tokens, and per step the index of the window it is read from."""
     if window is None or steps <= window:

@@ -13,7 +13,7 @@ import numpy as np
 
 from topoloc.errors import InputError
 from topoloc.localization.decoders import Beam
-from topoloc.localization.rnn import OnlineRNN
+from topoloc.localization.rnn import OnlineRNN, check_model
 from topoloc.localization.roadmap import (
     Observations,
     Odometry,
@@ -28,12 +28,7 @@ class _RnnLocalizer(RoadLocalizer):
     observes, requires_model = "tokens", True
 
     def setup(self, map: RoadMap, conf: dict[str, Any]) -> None:
-        if map.model is None:
-            raise InputError("model", f"the {self.name} localizer needs a trained trajectory model")
-        num_edges = int(map.model.hparams.num_edges)
-        if num_edges != map.graph.num_edges:
-            raise InputError("model", f"the model predicts {num_edges} edge classes but the graph has {map.graph.num_edges} "
-                                      "edges: a model trained on another map?")
+        check_model(map, self.name)
         rnn = conf["localization"]["rnn"]
         self.rnn = OnlineRNN(map.model, rnn["window"], rnn["stride"])
         self.bins = int(map.model.hparams.bins)

@@ -19,32 +19,21 @@ from typing import Any
 import numpy as np
 
 from topoloc.errors import InputError
-from topoloc.geometry import straight_token
 from topoloc.localization.hmm import CellHMM, HmmParams
-from topoloc.localization.rnn import OnlineRNN
-from topoloc.localization.roadmap import (
-    Observations,
-    Odometry,
-    RoadLocalizer,
-    RoadMap,
-    token_observations,
-)
+from topoloc.localization.rnn import OnlineRNN, check_model
+from topoloc.localization.roadmap import Observations, Odometry, RoadMap, token_observations
 from topoloc.localizer import Answer, register
+from topoloc.localizers.hmm import HmmBaseline
 
 
 @register
-class RnnFilter(RoadLocalizer):
+class RnnFilter(HmmBaseline):
     """HMM forward filter over cells of directed roads whose evidence is the RNN's road distribution; Viterbi path."""
 
     name, label, observes, requires_model = "rnn_filter", "RNN + map filter", "tokens", True
 
     def setup(self, map: RoadMap, conf: dict[str, Any]) -> None:
-        if map.model is None:
-            raise InputError("model", f"the {self.name} localizer needs a trained trajectory model")
-        num_edges = int(map.model.hparams.num_edges)
-        if num_edges != map.graph.num_edges:
-            raise InputError("model", f"the model predicts {num_edges} edge classes but the graph has {map.graph.num_edges} "
-                                      "edges: a model trained on another map?")
+        check_model(map, self.name)
         settings = conf["localization"]["rnn_filter"]
         self.bins = int(map.model.hparams.bins)
         params = HmmParams.from_conf(conf["localization"]["hmm"])
@@ -60,9 +49,8 @@ class RnnFilter(RoadLocalizer):
         return Observations([(int(t), f) for t, f in zip(obs.items, obs.extra["features"])], obs.frame, obs.extra)
 
     def start(self) -> None:
-        self.hmm.start()
+        super().start()
         self.rnn.start()
-        self._answer = Answer(-1, 0.0)
 
     def update(self, observation: Any) -> Answer:
         token, inputs = observation if isinstance(observation, tuple) else (observation, None)
@@ -70,30 +58,4 @@ class RnnFilter(RoadLocalizer):
             raise InputError("tokens", f"tokens must lie in [0, {self.bins}) for this model, got {token}")
         logp = self.rnn.step(int(token), inputs if self.feature_dim else None)
         evidence = self.weight * np.maximum(logp.astype(float), self.log_floor)[self.hmm.cell_edge]
-        edge, confidence = self.hmm.step(int(token), evidence=evidence)
-        cells = np.flatnonzero(self.hmm.cell_edge == edge)
-        cell = int(cells[np.argmax(self.hmm.alpha[cells])])
-        self._answer = Answer(edge, confidence, tuple(self.hmm.grid.xy[cell]))
-        return self._answer
-
-    def answer(self) -> Answer:
-        return self._answer
-
-    def path(self) -> np.ndarray | None:
-        if not self.hmm.back:
-            return None
-        cells, _ = self.hmm.trace()
-        return self.hmm.cell_edge[cells]
-
-    def explained(self, items: list[Any]) -> tuple[float, int]:
-        """Share of the turn tokens that the map's turn along the Viterbi path matches, and their number."""
-        cells, _ = self.hmm.trace()
-        tokens = np.asarray([i[0] if isinstance(i, tuple) else i for i in items], np.int64)
-        return self.hmm.explained_turns(tokens, cells), int(np.sum(tokens[1:] != straight_token(self.bins)))
-
-    def summary(self) -> dict[str, Any]:
-        if not self.hmm.back:
-            return {}
-        _, restarts = self.hmm.trace()
-        return {"initial_hypotheses": [int(e) for e in self.hmm.initial], "restarts": int(restarts),
-                "cells": int(self.hmm.num_cells)}
+        return self._step(int(token), evidence)
