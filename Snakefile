@@ -21,6 +21,8 @@ include: "workflow/rules/trajectory.smk"
 include: "workflow/rules/place.smk"
 include: "workflow/rules/drive.smk"
 include: "workflow/rules/localization.smk"
+include: "workflow/rules/common_regions.smk"
+include: "workflow/rules/regions.smk"
 
 
 rule all:
@@ -28,6 +30,7 @@ rule all:
     input:
         all_outputs(),
         expand(rules.report_html.output, region=REGION),
+        region_targets(),
 
 
 onsuccess:
@@ -35,4 +38,6 @@ onsuccess:
 
 
 onerror:
+    report_failures()
     finish_invocation(os.environ.get(INVOCATION_ENV), "FAILED")
+    close_killed_runs()

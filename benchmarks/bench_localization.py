@@ -4,7 +4,8 @@ Needs the kitti00 pipeline's graph and odometry (``snakemake --configfile config
 localizers also its trained model, else they are left out):
 
     PYTHONPATH=src python benchmarks/bench_localization.py [--results results/kitti00] [--model PATH]
-        [--localizers metric,hmm,raw,strategy1,strategy2] [--configfile FILE] [--steps 5000]
+        [--localizers metric,hmm,rnn_filter,raw,strategy1,strategy2] [--configfile FILE] [--steps 5000]
+        [--set localization.rnn_filter.evidence_weight=0.5 ...]
 
 Prints markdown:
 
@@ -13,7 +14,8 @@ Prints markdown:
    (:mod:`topoloc.localization.evaluation`, a start every ``localization.evaluate.start_every_m``), and
    the CPU seconds of all starts;
 2. the figures from frame 0 (distance to localized and the oracle's, accuracy after, position error);
-3. the targets of the metric filter on KITTI 00;
+3. the targets of the metric filter on KITTI 00, and of the learned localizer (its best decoder against the
+   HMM baseline and the oracle);
 4. decoding steps per second of Strategy 1 and 2 for k = 5 and k = 50 (with a model).
 """
 
@@ -27,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from topoloc.config import load
+from topoloc.config import dotted_overrides, load
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.decoders import beam_decode
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start, start_frames, summarize
@@ -45,11 +47,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--results", default="results/kitti00", help="results folder of the kitti00 pipeline")
     parser.add_argument("--model", default=None, help="model checkpoint (default: RESULTS/model/model.ckpt, if present)")
-    parser.add_argument("--localizers", default="metric,hmm,raw,strategy1,strategy2")
+    parser.add_argument("--localizers", default="metric,hmm,rnn_filter,raw,strategy1,strategy2")
+    parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE", help="override config keys")
     parser.add_argument("--configfile", default=str(REPO / "config" / "config.yaml"))
     parser.add_argument("--steps", type=int, default=5000, help="steps of the decoding-speed runs")
     args = parser.parse_args(argv)
-    conf = load(args.configfile)
+    conf = load(args.configfile, dotted_overrides(args.set))
     lconf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
     ev = conf["localization"]["evaluate"]
     results = Path(args.results)
@@ -111,11 +114,24 @@ def main(argv: list[str] | None = None) -> int:
                   f"{s.median_m / o.median_m:.2f}, <= 1.3); median position error {s.position_error_m:.2f} m (<= 5); "
                   f"starts the oracle resolves localized: {np.isfinite(resolved.localized_m).mean():.3f}, all starts "
                   f"{s.localized_share:.3f}; CPU of all starts {seconds[(drive, 'metric')]:.2f} s (<= 10)")
+    learned = [n for n in names if known[n].requires_model]
+    if learned and "hmm" in names:
+        print("\n## Targets of the learned localizer on KITTI 00\n")
+        for drive in ("gt", "orbslam2"):
+            rows_of = summary[summary.drive == drive].set_index("localizer")
+            best = min(learned, key=lambda n: (rows_of.loc[n, "median_m"], -rows_of.loc[n, "accuracy_after"]))
+            b, h, o = rows_of.loc[best], rows_of.loc["hmm"], rows_of.loc["oracle"]
+            print(f"- {drive}: best learned decoder {best}: median {b.median_m:.0f} m vs HMM {h.median_m:.0f} m "
+                  f"(ahead: {b.median_m < h.median_m}), accuracy after {b.accuracy_after:.3f} vs HMM {h.accuracy_after:.3f} "
+                  f"(ahead: {b.accuracy_after > h.accuracy_after}); median / oracle median {b.median_m / o.median_m:.2f} "
+                  f"(<= 2), median ratio {b.median_ratio:.2f}; accuracy after >= 0.95: {b.accuracy_after >= 0.95}")
     if model is not None:
         print(f"\n## Decoding speed ({args.steps} steps: the gt drive's RNN outputs repeated)\n")
         print("| decoder | k | steps/s |\n|---|---|---|")
-        tokens = make("raw").observe(Odometry.from_poses(read_poses(results / "odometry" / "gt" / "poses.txt")), road, lconf).items
-        logp = edge_log_probs(model, np.asarray(tokens), conf["localization"]["rnn"]["window"], conf["localization"]["rnn"]["stride"])
+        items = make("raw").observe(Odometry.from_poses(read_poses(results / "odometry" / "gt" / "poses.txt")), road, lconf).items
+        tokens = np.asarray([i[0] if isinstance(i, tuple) else i for i in items])
+        inputs = np.stack([i[1] for i in items]) if isinstance(items[0], tuple) else None
+        logp = edge_log_probs(model, tokens, conf["localization"]["rnn"]["window"], conf["localization"]["rnn"]["stride"], inputs)
         long = np.concatenate([logp] * (args.steps // len(logp) + 1))[: args.steps]
         for strategy in ("strategy1", "strategy2"):
             for k in (5, 50):

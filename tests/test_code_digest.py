@@ -85,8 +85,8 @@ def test_every_rule_digests_its_scripts_stage_module() -> None:
     stages = stage_modules()
     checked = 0
     for smk in RULES.glob("*.smk"):
-        for block in re.split(r"(?m)^(?=rule \w+:)", smk.read_text())[1:]:
-            rule = block.split(":")[0].removeprefix("rule ")
+        for block in re.split(r"(?m)^(?=[ \t]*rule \w+:)", smk.read_text())[1:]:
+            rule = block.strip().split(":")[0].removeprefix("rule ")  # rules under an `if` are indented
             script = re.search(r'"\.\./scripts/(\w+\.py)"', block)
             if not script or script.group(1) not in stages:
                 continue

@@ -30,6 +30,8 @@ REPO = Path(__file__).resolve().parents[1]
          "topoloc: place.localize.localizers.1: unknown localizer 'metric'; choose from ['place_filter', "),
         ("localization:\n  localizers: [metric, place_filter]\n",
          "topoloc: localization.localizers.1: unknown localizer 'place_filter'; choose from ['hmm', "),
+        ("odometry:\n  source: kitti_stereo\n  drives:\n    run1: {gps: g.csv}\n",
+         "topoloc: config key 'odometry.drives.run1.sequence': drive run1 has no sequence, which odometry.source kitti_stereo needs"),
     ],
 )
 def test_bad_config_fails_with_one_line(tmp_path, yaml, expected):
@@ -83,3 +85,37 @@ def test_load_names_the_file(tmp_path):
     bad.write_text("- a list\n")
     with pytest.raises(InputError, match=rf"^{bad}: a config file is a YAML mapping"):
         load(bad)
+
+
+@pytest.mark.parametrize(
+    ("odometry", "expected"),
+    [
+        ({"source": "kitti_poses", "drives": {"run1": {"gps": "g.csv", "ground_truth": "gt.txt"}}},
+         "config key 'odometry.drives.run1.poses': drive run1 has no poses, which odometry.source kitti_poses needs"),
+        ({"source": "kitti_poses", "drives": {"run1": {"poses": None, "gps": "g.csv"}}},
+         "config key 'odometry.drives.run1.poses': drive run1 has no poses"),
+        ({"source": "kitti_stereo", "drives": {"run1": {"poses": "p.txt", "gps": "g.csv"}}},
+         "config key 'odometry.drives.run1.sequence': drive run1 has no sequence, which odometry.source kitti_stereo needs"),
+        ({"source": "kitti_poses", "drives": {"run1": {"poses": "p.txt"}}},
+         "config key 'odometry.drives.run1.gps': drive run1 has no gps file and odometry.origin is not set"),
+        ({"source": "kitti_stereo", "drives": {}}, "config key 'odometry.drives': odometry.source kitti_stereo needs at least one drive"),
+    ],
+)
+def test_each_kitti_source_needs_its_drive_keys(odometry, expected):
+    from topoloc.config import load
+    from topoloc.errors import InputError
+
+    with pytest.raises(InputError) as err:
+        load(None, {"odometry": odometry})
+    assert str(err.value).startswith(expected) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("source", ["kitti_poses", "kitti_stereo", "simulated", "rendered"])
+def test_each_source_accepts_what_it_needs(source):
+    from topoloc.config import load
+
+    origin = {"lat": 48.98, "lon": 8.39, "heading_deg": 0.0}
+    drives = {"kitti_poses": {"run1": {"poses": "p.txt", "gps": "g.csv"}, "run2": {"poses": "q.txt"}},
+              "kitti_stereo": {"run1": {"sequence": "seq/00"}}}.get(source, {})  # simulated, rendered: no drives
+    config = load(None, {"odometry": {"source": source, "drives": drives, "origin": origin}})
+    assert config["odometry"]["source"] == source

@@ -73,7 +73,7 @@ def test_fit_restores_the_best_checkpoint_and_repeats_with_its_seed(tmp_path):
     assert len(snapshots.weights) == 3 and not torch.equal(snapshots.weights[1], snapshots.weights[2])
     assert torch.equal(result.module.layer.weight, snapshots.weights[1])
     assert torch.load(tmp_path / "model.ckpt", weights_only=False)["epoch"] == 1
-    assert not list(tmp_path.glob(".checkpoints-*"))  # the temporary checkpoints are gone
+    assert not list(tmp_path.glob(".topoloc-tmp.*"))  # the temporary checkpoints are gone
     history = result.history
     assert list(history.columns) == ["step", "epoch", "train/loss", "val/loss", "val/acc"]
     assert history["val/loss"].dropna().tolist() == VAL_LOSSES[:3] and history["train/loss"].notna().sum() == 12
@@ -122,3 +122,64 @@ def test_fit_logs_metrics_and_model_to_the_stage_run(tmp_path, monkeypatch):
 def test_fast_dev_run_writes_the_last_state(tmp_path):
     result = fit(Line, Points(), settings(fast_dev_run=True), tmp_path / "model.ckpt")
     assert (tmp_path / "model.ckpt").is_file() and result.metrics["steps"] == 1
+
+
+class Shuffled(L.LightningModule):
+    """A small MLP on shuffled batches with dropout: every source of randomness a real training has."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.net = torch.nn.Sequential(torch.nn.Linear(3, 16), torch.nn.ReLU(), torch.nn.Dropout(0.2),
+                                       torch.nn.Linear(16, 1))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)
+
+    def training_step(self, batch, batch_idx):
+        x, y = batch
+        loss = torch.nn.functional.mse_loss(self(x), y)
+        self.log("train/loss", loss)
+        return loss
+
+    def validation_step(self, batch, batch_idx):
+        x, y = batch
+        self.log("val/loss", torch.nn.functional.mse_loss(self(x), y))
+
+    def configure_optimizers(self):
+        return torch.optim.Adam(self.parameters(), lr=0.01)
+
+
+class Slow(L.Callback):
+    """A busy machine: every training step takes ``seconds`` longer."""
+
+    def __init__(self, seconds: float) -> None:
+        self.seconds = seconds
+
+    def on_train_batch_end(self, *args) -> None:
+        import time
+
+        time.sleep(self.seconds)
+
+
+def _comparable(metrics: dict[str, float]) -> dict[str, float]:
+    return {k: v for k, v in metrics.items() if k != "train_seconds"}
+
+
+def test_same_config_and_seed_give_the_same_metrics_on_a_slower_machine(tmp_path):
+    quiet = fit(Shuffled, Points(), settings(max_epochs=3, max_time_min=5.0), tmp_path / "quiet.ckpt")
+    busy = fit(Shuffled, Points(), settings(max_epochs=3, max_time_min=5.0), tmp_path / "busy.ckpt",
+               callbacks=[Slow(0.02)])
+    assert quiet.metrics["time_capped"] == 0 and quiet.metrics["steps"] == 24
+    assert busy.metrics["train_seconds"] > quiet.metrics["train_seconds"]
+    assert _comparable(busy.metrics) == _comparable(quiet.metrics)
+    assert busy.history.equals(quiet.history)
+    for a, b in zip(busy.module.parameters(), quiet.module.parameters(), strict=True):
+        assert torch.equal(a, b)
+
+
+def test_the_wall_clock_cap_is_reported_when_it_stops_a_fit(tmp_path, caplog):
+    with caplog.at_level("WARNING", logger="topoloc.training"):
+        result = fit(Shuffled, Points(), settings(max_epochs=50, max_time_min=0.01), tmp_path / "capped.ckpt",
+                     callbacks=[Slow(0.1)])
+    assert result.metrics["time_capped"] == 1 and result.metrics["epochs"] < 50
+    assert "safety cap max_time_min=0.01" in caplog.text

@@ -55,7 +55,39 @@ def validate_and_fill(config: dict[str, Any], source: str | Path | None = None) 
     if error is not None:
         where, message = _where_and_what(error)
         raise InputError(f"{source}: {where}" if source is not None else where, message)
+    if "odometry" in config:
+        try:
+            check_drives(config["odometry"])
+        except InputError as err:
+            raise InputError(f"{source}: {err.where}" if source is not None else err.where, err.message) from None
     return config
+
+
+#: The keys every drive of ``odometry.drives`` needs, per ``odometry.source`` (the others ignore drives).
+REQUIRED_DRIVE_KEYS = {"kitti_poses": ("poses",), "kitti_stereo": ("sequence",), "simulated": (), "rendered": ()}
+
+
+def check_drives(odometry: Mapping[str, Any]) -> None:
+    """InputError naming the drive and key when a drive lacks what ``odometry.source`` needs.
+
+    A ``kitti_*`` source needs at least one drive, each with its files (:data:`REQUIRED_DRIVE_KEYS`), and
+    either a gps file or ``odometry.origin`` to be placed on the map.
+    """
+    source = odometry["source"]
+    if source not in ("kitti_poses", "kitti_stereo"):
+        return
+    drives = odometry["drives"]
+    if not drives:
+        raise InputError("config key 'odometry.drives'", f"odometry.source {source} needs at least one drive")
+    for name, drive in drives.items():
+        for key in REQUIRED_DRIVE_KEYS[source]:
+            if not drive.get(key):
+                raise InputError(f"config key 'odometry.drives.{name}.{key}'",
+                                 f"drive {name} has no {key}, which odometry.source {source} needs")
+        if not drive.get("gps") and not odometry["origin"]:
+            raise InputError(f"config key 'odometry.drives.{name}.gps'",
+                             f"drive {name} has no gps file and odometry.origin is not set: "
+                             "set one of them to place the drive on the map")
 
 
 def load(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
@@ -78,6 +110,40 @@ def load(path: str | Path | None = None, overrides: Mapping[str, Any] | None = N
     data = deep_merge(data, overrides or {})
     data.setdefault("region", {"name": "default"})
     return validate_and_fill(data, path)
+
+
+def region_configs(config: Mapping[str, Any], base_dir: str | Path = ".") -> dict[str, dict[str, Any]]:
+    """The config of each region of ``config['regions']`` by name (empty when it names none).
+
+    An entry is a config file (relative to ``base_dir``) or a mapping; either is merged onto ``config`` without
+    its ``regions`` key, then filled and validated. InputError with one line naming the entry, the file or the
+    key: a file that cannot be read, a region named twice, a region config that names regions itself.
+    """
+    base = {k: v for k, v in config.items() if k != "regions"}
+    configs: dict[str, dict[str, Any]] = {}
+    for index, entry in enumerate(config.get("regions") or []):
+        where = f"regions.{index}"
+        if isinstance(entry, str):
+            path = Path(base_dir) / entry
+            try:
+                data = yaml.safe_load(path.read_text()) or {}
+            except OSError as err:
+                raise InputError(f"{where}: {entry}", f"cannot read the region's config file ({err.strerror})") from err
+            except yaml.YAMLError as err:
+                raise InputError(f"{where}: {entry}", f"not a YAML file ({str(err).splitlines()[0]})") from err
+            if not isinstance(data, dict):
+                raise InputError(f"{where}: {entry}", "a config file is a YAML mapping")
+            where = f"{where} ({entry})"
+        else:
+            data = entry
+        if data.get("regions"):
+            raise InputError(where, "a region's config cannot name regions itself")
+        merged = validate_and_fill(deep_merge(base, {k: v for k, v in data.items() if k != "regions"}), where)
+        name = merged["region"]["name"]
+        if name in configs:
+            raise InputError(where, f"region {name!r} is named twice in regions")
+        configs[name] = merged
+    return configs
 
 
 def dotted_overrides(items: list[str]) -> dict[str, Any]:

@@ -140,3 +140,30 @@ def encode_track(xy: NDArray[np.float64], spacing_m: float, bins: int, tolerance
     place, kind = token_places(encoded, cum[corners], seg["lengths"], np.full(len(seg["lengths"]), spacing_m), turn_label_offset_m)
     frame_of = np.clip(np.searchsorted(cum, place), 0, len(xy) - 1)
     return EncodedTrack(seg, encoded, kind, place, frame_of)
+
+
+#: The continuous per-token features of :func:`token_features`, in column order.
+TOKEN_FEATURES = ("distance", "turn", "heading_change")
+
+
+def token_features(track: EncodedTrack, yaw: NDArray[np.float64], spacing_m: float) -> NDArray[np.float32]:
+    """Continuous features ``(T, 3)`` of each token of ``track``, the metric information a token rounds away.
+
+    Columns (:data:`TOKEN_FEATURES`): metres driven since the previous token (since the first frame for the
+    first token) over ``spacing_m``; the unquantized turning angle of a turn token (signed degrees, left
+    positive, over 90; 0 at virtual nodes); the change of the odometry heading ``yaw`` (radians per frame)
+    since the previous token (degrees over 90), which keeps the bends that Douglas-Peucker leaves out.
+    """
+    place = np.asarray(track.place_m, float)
+    distance = np.diff(place, prepend=0.0) / spacing_m
+    turn = np.zeros(len(place))
+    seg = track.segments
+    starts = np.flatnonzero(np.asarray(track.kind) == "turn")
+    if len(starts):
+        s = track.encoded.segment[starts]
+        delta = np.mod(seg["heading_start"][s] - seg["heading_end"][s - 1] + 180.0, 360.0) - 180.0
+        turn[starts] = delta / 90.0
+    unwrapped = np.unwrap(np.asarray(yaw, float))
+    at = unwrapped[np.asarray(track.frame)]
+    change = np.degrees(np.diff(at, prepend=unwrapped[0])) / 90.0
+    return np.column_stack([distance, turn, change]).astype(np.float32)

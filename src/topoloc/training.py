@@ -6,14 +6,20 @@ opened by :mod:`topoloc.stage`) through Lightning's MLFlowLogger, writes the bes
 output, restores it, and logs it to MLflow as a PyTorch model with its signature.
 
 Metric names follow Lightning's style: ``train/loss``, ``val/loss``, ``val/acc``, ... (logged by the modules).
-A fit's summary metrics are ``train_seconds``, ``epochs``, ``steps``, ``parameters``, and those of the kept
-checkpoint: ``best/epoch`` and ``best/<metric>`` for each validation metric at that epoch (``best/val/loss``, ...).
+A fit's summary metrics are ``train_seconds``, ``epochs``, ``steps``, ``parameters``, ``time_capped`` and those
+of the kept checkpoint: ``best/epoch`` and ``best/<metric>`` for each validation metric at that epoch
+(``best/val/loss``, ...).
+
+Reproducibility: a fit is bounded by ``max_epochs`` (and early stopping on ``val/loss``), never by the clock, so
+the same config and seed give the same model on a quiet or a busy machine, only later on the busy one.
+``max_time_min`` is a safety cap only: when it stops a fit, ``time_capped`` is 1 and a warning names the epochs
+done, since the model then depends on the machine's speed.
 """
 
 from __future__ import annotations
 
+import logging
 import shutil
-import tempfile
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -26,7 +32,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from topoloc.io import atomic_path
+from topoloc.io import atomic_path, temporary_dir
 from topoloc.tracking import tracking_uri
 
 #: The metric that picks the checkpoint (and drives early stopping).
@@ -35,6 +41,8 @@ TRAIN_LOSS = "train/loss"
 VAL_PREFIX = "val/"
 
 Module = TypeVar("Module", bound=L.LightningModule)
+
+log = logging.getLogger(__name__)
 
 
 class History(L.Callback):
@@ -143,14 +151,28 @@ def fit(build: Callable[[], Module], data: L.LightningDataModule, settings: FitS
         started = time.perf_counter()
         trainer.fit(module, datamodule=data)
         seconds = time.perf_counter() - started
+        capped = time_capped(trainer)
         module = keep_best(checkpoint, trainer, model_path, module)
+    if capped:
+        log.warning("training stopped by the safety cap max_time_min=%s after %d of max_epochs=%d epochs (%d steps): "
+                    "the model depends on the machine's speed; raise max_time_min or lower max_epochs",
+                    settings.max_time_min, trainer.current_epoch, settings.max_epochs, trainer.global_step)
     frame = history.frame()
     metrics = {"train_seconds": seconds, "epochs": float(trainer.current_epoch), "steps": float(trainer.global_step),
-               "parameters": float(sum(p.numel() for p in module.parameters()))}
+               "parameters": float(sum(p.numel() for p in module.parameters())), "time_capped": float(capped)}
     metrics |= best_metrics(frame)
     if run_logger is not None and logged_model is not None:
         log_model(module, logged_model)
     return FitResult(module, frame, metrics)
+
+
+def time_capped(trainer: L.Trainer) -> bool:
+    """Whether the wall-clock cap (Lightning's :class:`~lightning.pytorch.callbacks.Timer`) stopped the fit."""
+    for callback in trainer.callbacks:
+        if isinstance(callback, L.pytorch.callbacks.Timer):
+            remaining = callback.time_remaining()
+            return remaining is not None and remaining <= 0
+    return False
 
 
 def best_metrics(history: pd.DataFrame) -> dict[str, float]:
@@ -195,13 +217,9 @@ def best_checkpoint(model_path: str | Path) -> Iterator[L.pytorch.callbacks.Mode
 
     The folder is removed when the block ends, however it ends.
     """
-    Path(model_path).parent.mkdir(parents=True, exist_ok=True)
-    ckpt_dir = Path(tempfile.mkdtemp(prefix=".checkpoints-", dir=Path(model_path).parent))
-    try:
+    with temporary_dir(model_path) as ckpt_dir:  # .topoloc-tmp.<model name>.*, see topoloc.io
         yield L.pytorch.callbacks.ModelCheckpoint(dirpath=ckpt_dir, filename="best", monitor=MONITOR, mode="min",
                                                   save_top_k=1)
-    finally:
-        shutil.rmtree(ckpt_dir, ignore_errors=True)
 
 
 def keep_best(checkpoint: L.pytorch.callbacks.ModelCheckpoint, trainer: L.Trainer, model_path: str | Path,

@@ -37,11 +37,24 @@ def test_identity_looks_along_z():
 def test_malformed_poses_line_names_file_and_line(tmp_path):
     path = tmp_path / "bad.txt"
     path.write_text(IDENTITY + "1 0 0 0 0 1 0 0 0 0 1\n")
-    with pytest.raises(InputError, match=r"bad.txt:2: .*12 finite numbers"):
+    with pytest.raises(InputError, match=r"bad.txt:2: a poses line needs 12 numbers \(3x4 matrix\), got 11$"):
         read_poses(path)
     path.write_text(IDENTITY * 2 + "1 0 0 x 0 1 0 0 0 0 1 0\n")
     with pytest.raises(InputError, match=r"bad.txt:3: not a number"):
         read_poses(path)
+
+
+def test_nan_in_inputs_is_named_as_such(tmp_path):
+    path = tmp_path / "nan.txt"
+    path.write_text(IDENTITY + "1 0 0 nan 0 1 0 0 0 0 1 inf\n")
+    with pytest.raises(InputError, match=r"nan.txt:2: a poses line needs finite numbers, got nan, inf \(value 4 of 12\)$"):
+        read_poses(path)
+    (tmp_path / "times.txt").write_text("0.0\nnan\n")
+    with pytest.raises(InputError, match=r"times.txt:2: a timestamp needs a finite number, got nan$"):
+        read_times(tmp_path / "times.txt", 2)
+    (tmp_path / "gps.csv").write_text("frame,lat,lon\n0,NaN,8.3\n")
+    with pytest.raises(InputError, match=r"gps.csv:2: lat/lon need finite numbers, got NaN, 8.3$"):
+        read_gps(tmp_path / "gps.csv", 1)
 
 
 def test_gps_shorter_than_poses(tmp_path):

@@ -90,3 +90,38 @@ def test_kitti00_labels_and_segments(kitti00, kitti00_graph, tmp_path, poses):
     gt_xy = frames[["gt_x", "gt_y"]].to_numpy()[tokens.frame]
     assert np.all(np.isfinite(gt_xy))
     assert (frames.edge_distance_m.to_numpy()[tokens.frame] <= 5.0).mean() >= 0.95
+
+
+def straight_drive(folder, frames=60):
+    """A 60 m straight KITTI poses file (forward along +z)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    poses = folder / "poses.txt"
+    poses.write_text("".join(f"1 0 0 0 0 1 0 0 0 0 1 {k:.1f}\n" for k in range(frames)))
+    return poses
+
+
+def test_a_drive_of_another_city_stops_extract_odometry(grid_graph, tmp_path):
+    """GPS of Helsinki on a Karlsruhe map: one line naming the GPS file, before anything is written."""
+    poses = straight_drive(tmp_path / "in")
+    gps = tmp_path / "in" / "gps.csv"
+    gps.write_text("frame,lat,lon\n" + "".join(f"{k},{60.17 + k * 9e-6:.7f},24.94\n" for k in range(60)))
+    out = odometry_outputs(tmp_path, "d")
+    conf = {**CONF, "source": "kitti_poses", "drive": "d"}
+    with pytest.raises(InputError) as info:
+        extract_odometry.run(conf, {"graph": str(grid_graph), "poses": str(poses), "gps": str(gps)}, out)
+    message = str(info.value)
+    assert message.startswith(f"{gps}: drive d lies 1,") and " km (median) from the roads of the map (0% of its frames within 5 m" in message
+    assert message.endswith("the drive is not in this region")
+    assert not (tmp_path / "d").exists()
+
+
+def test_a_wrong_origin_stops_extract_odometry(grid_graph, tmp_path):
+    """Without GPS the origin places the drive: an origin 2.5 km away names odometry.origin; on the map it passes."""
+    poses = straight_drive(tmp_path / "in")
+    conf = {**CONF, "source": "kitti_poses", "drive": "d", "origin": {"lat": 49.0, "lon": 8.42, "heading_deg": 0.0}}
+    out = odometry_outputs(tmp_path, "d")
+    with pytest.raises(InputError, match=r"^odometry.origin: drive d lies 2,\d\d\d m \(median\) from the roads"):
+        extract_odometry.run(conf, {"graph": str(grid_graph), "poses": str(poses)}, out)
+    on_map = {**conf, "origin": {"lat": 48.98, "lon": 8.3905, "heading_deg": 90.0}}  # along the southern street
+    metrics = extract_odometry.run(on_map, {"graph": str(grid_graph), "poses": str(poses)}, out)
+    assert metrics["labels_within_5m"] == 1.0

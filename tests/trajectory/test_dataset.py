@@ -30,7 +30,7 @@ RIGHT = quantize_angle(270.0, 20)
 
 def conf(**dataset):
     """The generate_dataset slice of the defaults: 3-node paths, a quarter for validation, small shards; ``dataset`` keys."""
-    config = make_config(dataset={"path_nodes": 3, "val_fraction": 0.25, "shard_rows": 4, **dataset})
+    config = make_config(dataset={"source": "dfs", "path_nodes": 3, "val_fraction": 0.25, "shard_rows": 4, **dataset})
     return {"encoding": config["encoding"], "dataset": config["dataset"]}
 
 

@@ -18,7 +18,7 @@ from topoloc.trajectory.train_rnn import build_model, fit
 def confs(**train):
     """The config of a small, fast training (schema defaults otherwise), ``train`` keys on top."""
     return make_config(
-        dataset={"path_nodes": 4, "respect_oneway": False, "val_fraction": 0.2, "shard_rows": 64},
+        dataset={"source": "dfs", "path_nodes": 4, "respect_oneway": False, "val_fraction": 0.2, "shard_rows": 64},
         model={"cell": "gru", "hidden_size": 64, "embedding_dim": 16},
         train={"batch_size": 16, "max_epochs": 1, "max_time_min": None, "early_stopping_patience": None,
                "gradient_clip": 1.0, "accelerator": "cpu", "log_every_n_steps": 5, **train},
@@ -43,7 +43,9 @@ def small_dataset(tmp_path):
     return graph, stats, tmp_path
 
 def test_padding_and_masked_loss():
-    tokens, labels, lengths = pad_batch([(torch.tensor([1, 2, 3]), torch.tensor([4, 4, 5])), (torch.tensor([7]), torch.tensor([6]))], pad_token=20)
+    tokens, labels, lengths, inputs = pad_batch([(torch.tensor([1, 2, 3]), torch.tensor([4, 4, 5]), torch.ones(3, 2)),
+                                                 (torch.tensor([7]), torch.tensor([6]), torch.ones(1, 2))], pad_token=20)
+    assert inputs.shape == (2, 3, 2) and inputs[1, 1:].abs().sum() == 0  # features padded with zeros
     assert tokens.tolist() == [[1, 2, 3], [7, 20, 20]] and labels.tolist() == [[4, 4, 5], [6, IGNORE, IGNORE]]
     assert lengths.tolist() == [3, 1]
     model = TrajectoryRNN(20, 8, cell="rnn")

@@ -16,13 +16,19 @@ import yaml
 REPO = Path(__file__).resolve().parents[2]
 
 
+def clean_env() -> dict[str, str]:
+    """This environment without the variables a ``snakemake`` call sets for its jobs (tracking store, invocation)."""
+    drop = {"MLFLOW_TRACKING_URI", "TOPOLOC_INVOCATION_ID", "TOPOLOC_INVOCATION_PID"}
+    return {k: v for k, v in os.environ.items() if k not in drop}
+
+
 @dataclass
 class Workflow:
     root: Path
 
     def run(self, *args: str, check: bool = True) -> subprocess.CompletedProcess:
         """``snakemake ARGS`` in the copy; raise with its output when it fails and ``check``."""
-        env = {k: v for k, v in os.environ.items() if k not in {"MLFLOW_TRACKING_URI", "TOPOLOC_INVOCATION_ID"}}
+        env = clean_env()
         proc = subprocess.run([sys.executable, "-m", "snakemake", *args], cwd=self.root, capture_output=True, text=True, env=env)
         if check and proc.returncode != 0:
             raise AssertionError(f"snakemake {' '.join(args)} failed:\n{proc.stdout}\n{proc.stderr}")
@@ -50,6 +56,7 @@ def workflow(tmp_path) -> Workflow:
     root = tmp_path / "repo"
     root.mkdir()
     shutil.copy(REPO / "Snakefile", root)
+    (root / "profiles").symlink_to("workflow/profiles")  # the workflow profile, as in the checkout
     for folder in ("workflow", "config", "src"):
         shutil.copytree(REPO / folder, root / folder, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
     # The pipeline's mechanics are under test here, not accuracy: small data and training budgets.
@@ -58,6 +65,8 @@ def workflow(tmp_path) -> Workflow:
     config["odometry"]["simulated"]["drives"] = 1
     config["render"].update(length_m=120, sheet={"conditions": ["clear_noon", "night"], "frames": 2})
     config["dataset"]["max_paths_total"] = 2000
+    config["dataset"]["simulated"] = {"drives": 40, "length_m": [300, 600]}
+    config["train"]["log_every_n_steps"] = 1  # 32 training drives make one step per epoch: log every step
     config["train"].update(max_epochs=2, max_time_min=0.5)
     place = config["place"]
     place["image"].update(width=64, height=48)

@@ -53,14 +53,14 @@ def test_pipeline_caching_and_tracking(workflow):
     # the HTML report; one MLflow run each.
     loc = root / "results" / "helsinki" / "localization"
     table = (loc / "localization.md").read_text()
-    assert all(name in table for name in ("raw (argmax)", "Strategy 1", "Strategy 2", "HMM baseline", "metric filter",
+    assert all(name in table for name in ("raw (argmax)", "Strategy 1", "Strategy 2", "RNN + map filter", "HMM baseline", "metric filter",
                                           "oracle (uniqueness limit of the map)", "**all**", "From frame 0"))
     assert (loc / "fig9_ren00_clear_noon.png").stat().st_size > 10_000 and (loc / "localized_cdf.png").stat().st_size > 10_000
     assert (loc / "ren00_clear_noon" / "localization.geojson").is_file()
     answers = pd.read_csv(loc / "ren00_clear_noon" / "answers.csv")
-    assert set(answers.localizer) == {"raw", "strategy1", "strategy2", "hmm", "metric"} and answers.start.nunique() >= 1
+    assert set(answers.localizer) == {"raw", "strategy1", "strategy2", "rnn_filter", "hmm", "metric"} and answers.start.nunique() >= 1
     starts = pd.read_csv(loc / "starts.csv")
-    assert set(starts.localizer) == {"raw", "strategy1", "strategy2", "hmm", "metric", "oracle"}
+    assert set(starts.localizer) == {"raw", "strategy1", "strategy2", "rnn_filter", "hmm", "metric", "oracle"}
     report = root / "results" / "helsinki" / "report.html"
     assert report.stat().st_size > 100_000 and b"fig9_ren00_clear_noon.png" in report.read_bytes()
     evaluate = children["evaluate_localization"]
@@ -117,6 +117,7 @@ def test_bad_inputs_fail_with_one_line_and_leave_nothing(workflow):
     errors = [line for line in proc.stderr.splitlines() if line.startswith("topoloc: ")]
     assert len(errors) == 1 and errors[0].startswith("topoloc: corrupt.osm: cannot read OSM data (XML parsing error")
     assert errors[0].endswith("(region.osm_file)")
+    assert proc.stderr.rstrip().splitlines()[-1] == errors[0]  # the last line the user sees, printed once
     assert not (root / "results" / "broken" / "osm" / "region.osm").exists()
 
     cases = {

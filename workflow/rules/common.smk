@@ -1,5 +1,7 @@
 # Shared helpers: config validation, result paths, code digests, MLflow invocation id.
+import atexit
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -7,7 +9,8 @@ from topoloc.config import validate_and_fill
 from topoloc.errors import InputError
 from topoloc.code_digest import code_digest_of
 from topoloc.osm.download_osm import PYROSM_PREFIX, raw_osm_suffix, region_source
-from topoloc.tracking import INVOCATION_ENV, finish_invocation, new_invocation_id
+from topoloc.stage import failure_line
+from topoloc.tracking import INVOCATION_ENV, OWNER_ENV, close_stale_runs, finish_invocation, new_invocation_id
 
 
 def _fail(message):
@@ -32,10 +35,34 @@ if REGION_SOURCE == "osm_file" and not str(config["region"]["osm_file"]).startsw
         _fail(f"{config['region']['osm_file']}: OSM file not found (region.osm_file)")
 
 wildcard_constraints:
-    region=r"[A-Za-z0-9][A-Za-z0-9_.-]*",
+    region=re.escape(REGION),  # exactly this config's region: further regions are modules of their own (regions.smk)
 
 # One id per `snakemake` call; jobs inherit it and hang their MLflow runs under one parent.
 os.environ.setdefault(INVOCATION_ENV, new_invocation_id())
+os.environ.setdefault(OWNER_ENV, str(os.getpid()))
+
+
+def close_killed_runs():
+    """Close as KILLED the MLflow runs of jobs and calls that were killed (their process is gone)."""
+    try:
+        closed = close_stale_runs()
+    except Exception as err:  # the store itself is broken: say so, but do not stop the workflow for it
+        print(f"topoloc: warning: cannot close the MLflow runs of killed jobs ({type(err).__name__}: {err})", file=sys.stderr)
+        return
+    if closed:
+        print(f"topoloc: closed {len(closed)} MLflow run(s) of killed jobs as KILLED", file=sys.stderr)
+
+
+close_killed_runs()
+
+
+def report_failures():
+    """onerror: print, once and after Snakemake's last words, the `topoloc: ...` line of each failed job."""
+    failed = getattr(getattr(workflow, "scheduler", None), "failed", None) or []
+    lines = dict.fromkeys(failure_line(job.rule.name, dict(job.wildcards.items()), [str(p) for p in job.log])
+                          for job in sorted(failed, key=lambda job: job.jobid))
+    if lines:
+        atexit.register(lambda: print("\n".join(lines), file=sys.stderr, flush=True))
 
 
 # The library of this checkout (the one `pip install -e .` puts on the path), else the installed one.
@@ -112,9 +139,10 @@ def odometry_inputs(wildcards):
 
 
 def dataset_conf():
-    """Config slice of generate_dataset: segmentation only when training paths are segmented like drives."""
+    """Config slice of generate_dataset: segmentation only when training paths are segmented like drives
+    (simulated drives always are)."""
     conf = {"encoding": config["encoding"], "dataset": config["dataset"], "region": config["region"]["name"]}
-    if config["dataset"]["encoding"] == "douglas_peucker":
+    if config["dataset"]["encoding"] == "douglas_peucker" or config["dataset"]["source"] == "simulated_drives":
         conf["segmentation"] = config["segmentation"]
     return conf
 

@@ -1,5 +1,6 @@
 rule generate_dataset:
-    """DFS training trajectories (exactly dataset.path_nodes map nodes) as angle tokens and edge labels; Table I."""
+    """Training trajectories as angle tokens (+ continuous features) and edge labels: simulated drives encoded like
+    test drives (dataset.source simulated_drives) or DFS map paths (dfs, the paper); Table I."""
     input:
         graph=rules.build_graph.output.graph,
     output:
@@ -40,7 +41,7 @@ rule train_rnn:
         "results/{region}/logs/train_rnn.log",
     benchmark:
         "results/{region}/benchmarks/train_rnn.tsv"
-    threads: workflow.cores
+    threads: lambda wildcards: workflow.cores  # evaluated per job: a cluster profile sets it (set-threads)
     script:
         "../scripts/train_rnn.py"
 
@@ -53,6 +54,7 @@ rule evaluate_rnn:
         train_metrics=rules.train_rnn.output.metrics,
         train=rules.generate_dataset.output.train,
         val=rules.generate_dataset.output.val,
+        graph_stats=rules.build_graph.output.stats,
     output:
         csv="results/{region}/evaluation/accuracy.csv",
         metrics="results/{region}/evaluation/metrics.json",

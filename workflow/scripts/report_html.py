@@ -15,7 +15,7 @@ from pathlib import Path
 import yaml
 
 from topoloc.errors import InputError
-from topoloc.io import atomic_path
+from topoloc.io import atomic_path, temporary_name
 from topoloc.stage import run_stage
 from topoloc.tracking import INVOCATION_ENV
 
@@ -24,7 +24,7 @@ def build_report(conf, inputs, outputs):
     out = Path(outputs["html"])
     targets = [str(path) for path in snakemake.input]  # noqa: F821 (unnamed: every file of rule all before the report)
     env = {k: v for k, v in os.environ.items() if k != INVOCATION_ENV}  # the nested call opens no MLflow runs
-    with tempfile.NamedTemporaryFile("w", suffix=".yaml", dir=out.parent, delete=False) as handle:
+    with tempfile.NamedTemporaryFile("w", prefix=temporary_name(out), suffix=".yaml", dir=out.parent, delete=False) as handle:
         yaml.safe_dump(dict(snakemake.config), handle)  # noqa: F821 (the merged config of this call)
     try:
         with atomic_path(out) as tmp:

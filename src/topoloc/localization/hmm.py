@@ -130,11 +130,17 @@ class CellHMM:
         self.log_evidence = 0.0
         self.initial = np.zeros(0, np.int64)
 
-    def step(self, token: int, initial_k: int = 5) -> tuple[int, float]:
-        """Forward filter and Viterbi step for one token; the online answer (edge, its marginal)."""
+    def step(self, token: int, initial_k: int = 5, evidence: NDArray[np.float64] | None = None) -> tuple[int, float]:
+        """Forward filter and Viterbi step for one token; the online answer (edge, its marginal).
+
+        ``evidence``: an extra log-likelihood per cell of this step (e.g. a learned model's, see
+        :mod:`topoloc.localizers.rnn_filter`), multiplied into the forward and Viterbi scores.
+        """
         n = self.num_cells
         reset = self.params.reset_prob
         new = np.bincount(self.dst, weights=self.alpha[self.src] * self.weights[token], minlength=n)
+        if evidence is not None:
+            new = new * np.exp(evidence - evidence.max())
         total = new.sum()
         self.log_evidence += math.log(max(total, 1e-300))
         alpha = new / total if total > 0 else np.full(n, 1.0 / n)
@@ -148,6 +154,8 @@ class CellHMM:
         # Viterbi: the best way into each cell (entries are grouped by destination)
         delta = self.delta
         score = delta[self.src] + self.log_weights[token]
+        if evidence is not None:
+            score = score + evidence[self.dst]
         best = np.full(n, -np.inf)
         best[self.dst_cells] = np.maximum.reduceat(score, self.dst_start)
         hit = score >= np.repeat(best[self.dst_cells], np.diff(np.append(self.dst_start, len(score))))

@@ -55,6 +55,7 @@ from topoloc.localization.connectivity import DirectedEdges
 from topoloc.localization.lanes import lane_chains
 
 TWO_PI = 2.0 * math.pi
+INT_SETTINGS = ("scale_classes", "coarse_factor", "coarse_min_cells", "coarse_handoff_cells")
 
 
 @dataclass(frozen=True)
@@ -76,11 +77,14 @@ class MetricSettings:
     prune: float
     scale_error_max: float
     scale_classes: int
+    coarse_factor: int = 1
+    coarse_min_cells: int = 0
+    coarse_handoff_cells: int = 20000
 
     @classmethod
     def from_conf(cls, conf: dict) -> MetricSettings:
         """The settings of the validated config slice ``localization.metric``."""
-        return cls(**{k: (int if k == "scale_classes" else float)(conf[k]) for k in cls.__dataclass_fields__})
+        return cls(**{k: (int if k in INT_SETTINGS else float)(conf[k]) for k in cls.__dataclass_fields__})
 
 
 @dataclass(frozen=True)

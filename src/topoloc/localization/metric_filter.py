@@ -27,6 +27,9 @@ TINY = float(np.finfo(np.float32).tiny)
 #: Precision of the belief: single precision is ample for probabilities renormalized every step and for headings
 #: (a cosine to 6e-8), and makes the elementwise work of a step three to four times faster than double.
 REAL, COMPLEX = np.float32, np.complex64
+#: At most this many entries when a filter splits into its scale classes (maps of up to 131,072 cells split at a
+#: 32nd of the map; a city map's split belief would otherwise hold hundreds of thousands of entries).
+SPLIT_MAX = 4096
 
 
 def _gather(matrix: sp.csr_matrix, rows: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
@@ -77,7 +80,7 @@ class MetricFilter:
         self._dense = self.grid.num_cells // 8  # entries above which a group moves by one sparse matrix product
         # entries at or below which a filter splits into its scale classes: once the belief holds a few
         # percent of the map, where each split entry costs ``classes`` times as much
-        self._split_at = self.grid.num_cells // 32
+        self._split_at = min(self.grid.num_cells // 32, SPLIT_MAX)
 
     @property
     def num_cells(self) -> int:
@@ -144,6 +147,29 @@ class MetricFilter:
         for b in which:
             self.ahead[b * self.classes:(b + 1) * self.classes] = 0.0
             self.history[int(b)] = []
+
+    def stop(self, which: int | NDArray[np.int64]) -> None:
+        """Stop filters ``which``: no entries, no steps (their history stays)."""
+        which = np.atleast_1d(np.asarray(which, np.int64))
+        self._set(*self._keep(~np.isin(self.group // self.classes, which)))
+        self.running[which] = False
+
+    def take(self, b: int) -> tuple[NDArray, ...]:
+        """Filter ``b``'s belief summed over its scale classes: (cell, weight, kappa, mean); the filter stops."""
+        _, cell, weight, kappa, mean = self._merged(b)
+        self.stop(b)
+        return cell, weight, kappa, mean
+
+    def seed(self, b: int, cell: NDArray[np.int64], weight: NDArray, kappa: NDArray, mean: NDArray,
+             offmap: float, last_yaw: float) -> None:
+        """(Re)start filter ``b`` from a given belief (entries of its nominal scale class), not from the uniform one."""
+        keep = self._keep(self.group // self.classes != b)
+        fresh = (np.full(len(cell), b * self.classes + self.center), np.asarray(cell, np.int64), np.asarray(weight, REAL),
+                 np.asarray(kappa, REAL), np.asarray(mean, COMPLEX))
+        self._set(*(np.concatenate(p) for p in zip(keep, fresh)))
+        self.offmap[b], self.last_yaw[b] = offmap, last_yaw
+        self.running[b], self.split[b] = True, False
+        self.ahead[b * self.classes:(b + 1) * self.classes] = 0.0
 
     def _reenter(self) -> None:
         """A lost filter (more likely off the map than on it) merges its groups and takes back ``enter_prob`` of

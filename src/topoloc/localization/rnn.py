@@ -19,6 +19,16 @@ from numpy.typing import NDArray
 from topoloc.errors import InputError
 
 
+def check_model(map: Any, localizer: str) -> None:
+    """Refuse a missing trajectory model, or one trained on a map with another number of roads (one line)."""
+    if map.model is None:
+        raise InputError("model", f"the {localizer} localizer needs a trained trajectory model")
+    num_edges = int(map.model.hparams.num_edges)
+    if num_edges != map.graph.num_edges:
+        raise InputError("model", f"the model predicts {num_edges} edge classes but the graph has {map.graph.num_edges} "
+                                  "edges: a model trained on another map?")
+
+
 def window_plan(steps: int, window: int | None, stride: int | None) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """Window start tokens, and per step the index of the window it is read from."""
     if window is None or steps <= window:
@@ -31,8 +41,10 @@ def window_plan(steps: int, window: int | None, stride: int | None) -> tuple[NDA
     return np.arange(first.max() + 1, dtype=np.int64) * stride, first
 
 
-def edge_log_probs(model: Any, tokens: NDArray[np.int64], window: int | None = None, stride: int | None = None) -> NDArray[np.float32]:
-    """``(T, E)`` log-probabilities of the edge classes at every token of one drive."""
+def edge_log_probs(model: Any, tokens: NDArray[np.int64], window: int | None = None, stride: int | None = None,
+                   inputs: NDArray[np.float32] | None = None) -> NDArray[np.float32]:
+    """``(T, E)`` log-probabilities of the edge classes at every token of one drive (``inputs``: its
+    continuous features ``(T, F)`` for a model trained with them)."""
     import torch  # torch only when a model runs: the localizer registry imports this module (and the workflow the registry)
 
     tokens = np.asarray(tokens, dtype=np.int64)
@@ -43,15 +55,20 @@ def edge_log_probs(model: Any, tokens: NDArray[np.int64], window: int | None = N
     length = steps if len(starts) == 1 else int(window)
     pad = int(model.hparams.bins) if hasattr(model, "hparams") else int(tokens.max())
     batch = np.full((len(starts), length), pad, dtype=np.int64)
+    dim = int(getattr(model, "hparams", {}).get("feature_dim", 0))
+    feats = np.zeros((len(starts), length, dim), np.float32)
     for row, start in enumerate(starts):
         piece = tokens[start:start + length]
         batch[row, :len(piece)] = piece
+        if dim and inputs is not None:
+            feats[row, :len(piece)] = np.asarray(inputs, np.float32)[start:start + length]
     model.eval()
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # a few small windows: one thread is fastest, and never waits on a busy core
     try:
         with torch.inference_mode():
-            logp = torch.log_softmax(model(torch.as_tensor(batch)).float(), dim=-1).numpy()
+            args = (torch.as_tensor(batch), torch.as_tensor(feats)) if dim else (torch.as_tensor(batch),)
+            logp = torch.log_softmax(model(*args).float(), dim=-1).numpy()
     finally:
         torch.set_num_threads(threads)
     t = np.arange(steps)
@@ -80,8 +97,9 @@ class OnlineRNN:
         self.t = 0
         self.windows: dict[int, Any] = {}  # window start -> recurrent state
 
-    def step(self, token: int) -> NDArray[np.float32]:
-        """Log-probabilities ``(E,)`` of the edge classes after ``token``."""
+    def step(self, token: int, inputs: NDArray[np.float32] | None = None) -> NDArray[np.float32]:
+        """Log-probabilities ``(E,)`` of the edge classes after ``token`` (``inputs``: its continuous features,
+        for a model trained with them)."""
         torch = self._torch
         t = self.t
         if not self.windows or (self.window is not None and t % self.stride == 0):
@@ -94,7 +112,11 @@ class OnlineRNN:
         torch.set_num_threads(1)
         try:
             with torch.inference_mode():
-                embedded = self.model.embedding(x)
+                if hasattr(self.model, "step_input"):
+                    f = None if inputs is None else torch.as_tensor(np.asarray(inputs, np.float32)).reshape(1, 1, -1)
+                    embedded = self.model.step_input(x, f)
+                else:
+                    embedded = self.model.embedding(x)
                 for s in sorted(self.windows):
                     features, self.windows[s] = self.model.rnn(embedded, self.windows[s])
                     if out is None:  # the oldest window

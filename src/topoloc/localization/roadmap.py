@@ -23,7 +23,7 @@ from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.connectivity import DirectedEdges, directed_edges
 from topoloc.localizer import Localizer, Track
 from topoloc.motion.poses import planar_track, planar_yaw
-from topoloc.segmentation import encode_track
+from topoloc.segmentation import encode_track, token_features
 
 
 class RoadMap:
@@ -125,9 +125,14 @@ class RoadLocalizer(Localizer):
 
 
 def token_observations(odometry: Odometry, map: RoadMap, conf: dict[str, Any], bins: int) -> Observations:
-    """The drive's Douglas-Peucker tokens (as the ``segment_trajectory`` stage makes them), with their frames."""
+    """The drive's Douglas-Peucker tokens (as the ``segment_trajectory`` stage makes them), with their frames.
+
+    ``extra`` holds each token's kind and place and its continuous features
+    (:func:`topoloc.segmentation.token_features`, ``features``: ``(T, 3)``).
+    """
     seg, enc = conf["segmentation"], conf["encoding"]
     track = encode_track(odometry.xy, map.graph.virtual_node_spacing_m, bins, float(seg["tolerance_m"]),
                          float(enc["heading_lookahead_m"]), float(seg["turn_label_offset_m"]), float(seg["corner_skip_m"]))
     return Observations([int(t) for t in track.encoded.tokens], np.asarray(track.frame, np.int64),
-                        {"kind": track.kind, "place_m": track.place_m})
+                        {"kind": track.kind, "place_m": track.place_m,
+                        "features": token_features(track, odometry.yaw, map.graph.virtual_node_spacing_m)})

@@ -38,7 +38,11 @@ class HmmBaseline(RoadLocalizer):
         self._answer = Answer(-1, 0.0)
 
     def update(self, observation: int) -> Answer:
-        edge, confidence = self.hmm.step(int(observation))
+        return self._step(int(observation))
+
+    def _step(self, token: int, evidence: np.ndarray | None = None) -> Answer:
+        """One token through the filter (with per-cell log-likelihood ``evidence``, if any); the answer."""
+        edge, confidence = self.hmm.step(token, evidence=evidence)
         cells = np.flatnonzero(self.hmm.cell_edge == edge)
         cell = int(cells[np.argmax(self.hmm.alpha[cells])])
         self._answer = Answer(edge, confidence, tuple(self.hmm.grid.xy[cell]))
@@ -53,10 +57,10 @@ class HmmBaseline(RoadLocalizer):
         cells, _ = self.hmm.trace()
         return self.hmm.cell_edge[cells]
 
-    def explained(self, tokens: list[int]) -> tuple[float, int]:
+    def explained(self, items: list[Any]) -> tuple[float, int]:
         """Share of the turn tokens that the map's turn along the Viterbi path matches, and their number."""
         cells, _ = self.hmm.trace()
-        tokens_array = np.asarray(tokens, np.int64)
+        tokens_array = np.asarray([i[0] if isinstance(i, tuple) else i for i in items], np.int64)  # (token, features)
         return self.hmm.explained_turns(tokens_array, cells), int(np.sum(tokens_array[1:] != straight_token(self.bins)))
 
     def summary(self) -> dict[str, Any]:

@@ -1,5 +1,5 @@
 """The metric filter: a Bayes filter over 2 m positions on the roads, on the odometry itself
-(:mod:`topoloc.localization.metric`)."""
+(:mod:`topoloc.localization.metric`; on city maps with a coarse phase, :mod:`topoloc.localization.city_filter`)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from topoloc.localization.city_filter import CityFilter, coarse_settings, uses_coarse
 from topoloc.localization.metric import MetricModel, MetricSettings, odometry_steps
-from topoloc.localization.metric_filter import MetricFilter
 from topoloc.localization.roadmap import Observations, Odometry, RoadLocalizer, RoadMap
 from topoloc.localizer import Answer, Track, register
 
@@ -22,7 +22,12 @@ class MetricLocalizer(RoadLocalizer):
     def setup(self, map: RoadMap, conf: dict[str, Any]) -> None:
         settings = MetricSettings.from_conf(conf["localization"]["metric"])
         model = map.cached(("metric", settings), lambda: MetricModel(map.graph, map.states, settings))
-        self.filter = MetricFilter(model)
+        coarse = None
+        if uses_coarse(settings, model.num_cells):  # a city map: coarse cells while the belief is broad
+            wide = coarse_settings(settings)
+            coarse = map.cached(("metric", wide), lambda: MetricModel(map.graph, map.states, wide))
+        self.coarse_model = coarse
+        self.filter = CityFilter(model, coarse)
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
         steps = odometry_steps(odometry.xy, odometry.yaw, float(conf["localization"]["metric"]["cell_m"]))
@@ -50,7 +55,7 @@ class MetricLocalizer(RoadLocalizer):
         first = np.searchsorted(steps.frame, starts, side="right")  # the first step that ends after the start
         keep = first < len(steps)
         starts, first = starts[keep], first[keep]
-        bank = MetricFilter(self.filter.model, filters=len(starts))
+        bank = CityFilter(self.filter.model, self.coarse_model, filters=len(starts))
         answers: list[list[Answer]] = [[] for _ in starts]
         for j in range(len(steps)):
             fresh = np.flatnonzero(first == j)

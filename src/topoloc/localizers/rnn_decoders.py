@@ -13,7 +13,7 @@ import numpy as np
 
 from topoloc.errors import InputError
 from topoloc.localization.decoders import Beam
-from topoloc.localization.rnn import OnlineRNN
+from topoloc.localization.rnn import OnlineRNN, check_model
 from topoloc.localization.roadmap import (
     Observations,
     Odometry,
@@ -28,18 +28,18 @@ class _RnnLocalizer(RoadLocalizer):
     observes, requires_model = "tokens", True
 
     def setup(self, map: RoadMap, conf: dict[str, Any]) -> None:
-        if map.model is None:
-            raise InputError("model", f"the {self.name} localizer needs a trained trajectory model")
-        num_edges = int(map.model.hparams.num_edges)
-        if num_edges != map.graph.num_edges:
-            raise InputError("model", f"the model predicts {num_edges} edge classes but the graph has {map.graph.num_edges} "
-                                      "edges: a model trained on another map?")
+        check_model(map, self.name)
         rnn = conf["localization"]["rnn"]
         self.rnn = OnlineRNN(map.model, rnn["window"], rnn["stride"])
         self.bins = int(map.model.hparams.bins)
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
-        return token_observations(odometry, map, conf, int(map.model.hparams.bins))
+        """The drive's tokens; ``(token, features)`` pairs for a model trained with continuous features."""
+        obs = token_observations(odometry, map, conf, int(map.model.hparams.bins))
+        if not int(map.model.hparams.get("feature_dim", 0)):
+            return obs
+        items = [(int(t), f) for t, f in zip(obs.items, obs.extra["features"])]
+        return Observations(items, obs.frame, obs.extra)
 
     def start(self) -> None:
         self.rnn.start()
@@ -48,10 +48,11 @@ class _RnnLocalizer(RoadLocalizer):
     def answer(self) -> Answer:
         return self._answer
 
-    def _logp(self, token: int) -> np.ndarray:
+    def _logp(self, observation: Any) -> np.ndarray:
+        token, inputs = observation if isinstance(observation, tuple) else (observation, None)
         if not 0 <= int(token) < self.bins:
             raise InputError("tokens", f"tokens must lie in [0, {self.bins}) for this model, got {token}")
-        return self.rnn.step(int(token))
+        return self.rnn.step(int(token), inputs)
 
 
 @register

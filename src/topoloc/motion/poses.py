@@ -33,8 +33,12 @@ def read_poses(path: str | Path) -> NDArray[np.float64]:
                 values = [float(p) for p in parts]
             except ValueError:
                 raise InputError(f"{path}:{number}", f"not a number in a poses line: {line.strip()[:60]!r}") from None
-            if len(values) != 12 or not np.all(np.isfinite(values)):
-                raise InputError(f"{path}:{number}", f"a poses line needs 12 finite numbers (3x4 matrix), got {len(values)}")
+            if len(values) != 12:
+                raise InputError(f"{path}:{number}", f"a poses line needs 12 numbers (3x4 matrix), got {len(values)}")
+            if not np.all(np.isfinite(values)):
+                bad = [parts[i] for i in np.flatnonzero(~np.isfinite(values))]
+                raise InputError(f"{path}:{number}", f"a poses line needs finite numbers, got {', '.join(bad)} "
+                                                     f"(value {int(np.flatnonzero(~np.isfinite(values))[0]) + 1} of 12)")
             rows.append(values)
     if not rows:
         raise InputError(path, "poses file is empty")
@@ -64,6 +68,8 @@ def read_times(path: str | Path, count: int) -> NDArray[np.float64]:
                 values.append(float(line.split()[0]))
             except ValueError:
                 raise InputError(f"{path}:{number}", f"not a timestamp: {line.strip()[:60]!r}") from None
+            if not np.isfinite(values[-1]):
+                raise InputError(f"{path}:{number}", f"a timestamp needs a finite number, got {line.split()[0]}")
     if len(values) != count:
         raise InputError(path, f"{len(values)} timestamps for {count} poses")
     return np.asarray(values)
@@ -85,6 +91,8 @@ def read_gps(path: str | Path, count: int) -> NDArray[np.float64]:
                 frame, lat, lon = int(parts[0]), float(parts[1]), float(parts[2])
             except (ValueError, IndexError):
                 raise InputError(f"{path}:{number}", f"expected 'frame,lat,lon[,alt]', got {text[:60]!r}") from None
+            if not (np.isfinite(lat) and np.isfinite(lon)):
+                raise InputError(f"{path}:{number}", f"lat/lon need finite numbers, got {parts[1].strip()}, {parts[2].strip()}")
             if not (-90 <= lat <= 90 and -180 <= lon <= 180):
                 raise InputError(f"{path}:{number}", f"lat/lon out of range: {lat}, {lon}")
             latlon[frame] = (lat, lon)

@@ -48,6 +48,25 @@ from topoloc.odometry.stereo_vo import run_stereo_vo
 
 log = logging.getLogger(__name__)
 
+
+def check_on_map(graph: RoadGraph, xy: np.ndarray, max_offmap_m: float, drive: str, where: str) -> None:
+    """InputError naming ``where`` (the gps file or ``odometry.origin``) when the track ``xy`` lies off the map.
+
+    Off the map means: the median distance of its positions (at most 1000, evenly spaced) to the nearest
+    road exceeds ``max_offmap_m`` (a drive of another city, a wrong origin).
+    """
+    import shapely
+
+    tree = shapely.STRtree([shapely.LineString(g) for g in graph.geometry])
+    sample = np.asarray(xy, float)[:: max(1, len(xy) // 1000)]
+    _, dist = tree.query_nearest(shapely.points(sample), return_distance=True, all_matches=False)
+    median = float(np.median(dist))
+    if median > max_offmap_m:
+        far = f"{median / 1000:,.0f} km" if median >= 10_000 else f"{median:,.0f} m"
+        raise InputError(where, f"drive {drive} lies {far} (median) from the roads of the map ({np.mean(dist <= 5.0):.0%} "
+                                f"of its frames within 5 m; odometry.max_offmap_m {max_offmap_m:g}): the drive is not in this region")
+
+
 def _georeference(track: np.ndarray, yaw0: float, gps_xy: np.ndarray | None, conf: dict[str, Any], crs: str) -> Georeference:
     if gps_xy is not None:
         return fit_rigid(track, gps_xy)
@@ -125,6 +144,8 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
             if len(true_edges) != len(est):
                 raise InputError(inputs["truth"], f"{len(true_edges)} frames for {len(est)} estimated poses")
     label_xy = gt_map if gt_map is not None else (gps_xy if source != "simulated" and gps_xy is not None else est_map)
+    if source != "simulated":
+        check_on_map(graph, label_xy, float(conf["max_offmap_m"]), drive, inputs["gps"] if gps_xy is not None else "odometry.origin")
     mm = conf["map_matching"]
     match = match_track(graph, label_xy, radius_m=mm["radius_m"], sigma_m=mm["sigma_m"])
 

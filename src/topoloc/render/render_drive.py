@@ -18,9 +18,6 @@ their appearance. Outputs, beside each other in ``results/{region}/render/{drive
 from __future__ import annotations
 
 import logging
-import os
-import shutil
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -32,7 +29,7 @@ import pyproj
 from tqdm import tqdm
 
 from topoloc.graph.road_graph import RoadGraph
-from topoloc.io import atomic_path, write_json, write_text
+from topoloc.io import atomic_path, publish_dir, temporary_dir, write_json, write_text
 from topoloc.motion.poses import write_poses
 from topoloc.motion.route import CameraPath
 from topoloc.render.conditions import get_condition, parse_drive
@@ -55,12 +52,9 @@ PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWR
 
 def _write_images(renderer: Renderer, path: CameraPath, left_dir: Path, right_dir: Path) -> dict[str, float]:
     """Render every stereo pair into fresh ``left_dir`` / ``right_dir`` (atomically: a temporary folder, then renamed)."""
-    root = left_dir.parent
-    root.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".render.", dir=root))
     render_s = render_cpu_s = 0.0
     started = time.perf_counter()
-    try:
+    with temporary_dir(left_dir) as tmp:  # .topoloc-tmp.image_0.*: removed by a rerun if this job is killed
         (tmp / "image_0").mkdir()
         (tmp / "image_1").mkdir()
         for k in tqdm(range(len(path.xy)), desc="render", unit="pair", mininterval=2.0):
@@ -73,11 +67,7 @@ def _write_images(renderer: Renderer, path: CameraPath, left_dir: Path, right_di
                 if not cv2.imwrite(str(tmp / folder / f"{k:06d}.png"), image, PNG_PARAMS):
                     raise OSError(f"cannot write image {k} to {tmp / folder}")
         for name, dst in (("image_0", left_dir), ("image_1", right_dir)):
-            if dst.exists():
-                shutil.rmtree(dst)
-            os.replace(tmp / name, dst)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+            publish_dir(tmp / name, dst)
     total = time.perf_counter() - started
     n = len(path.xy)
     return {"render_s": render_s, "render_pairs_per_s": n / render_s, "render_pairs_per_cpu_s": n / render_cpu_s,

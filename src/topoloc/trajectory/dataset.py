@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from topoloc.encoding import encode_segments, polyline_end_headings
+from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.segmentation import segment_track, token_places
 from topoloc.trajectory.paths import Path as GraphPath
@@ -36,6 +38,7 @@ SCHEMA = pa.schema(
         ("edges", pa.list_(pa.int32())),
         ("tokens", pa.list_(pa.int16())),
         ("labels", pa.list_(pa.int32())),
+        ("features", pa.list_(pa.float32())),  # per token, row-major (T x feature_dim); empty without features
     ]
 )
 
@@ -124,8 +127,10 @@ class ShardWriter:
         self.rows: dict[str, list] = {name: [] for name in SCHEMA.names}
         self.count = 0
 
-    def add(self, path_id: int, copy: int, path: GraphPath, tokens: np.ndarray, labels: np.ndarray) -> None:
-        for name, value in zip(SCHEMA.names, (path_id, copy, path.nodes, path.edges, tokens, labels)):
+    def add(self, path_id: int, copy: int, path: GraphPath, tokens: np.ndarray, labels: np.ndarray,
+            features: np.ndarray | None = None) -> None:
+        flat = np.zeros(0, np.float32) if features is None else np.asarray(features, np.float32).ravel()
+        for name, value in zip(SCHEMA.names, (path_id, copy, path.nodes, path.edges, tokens, labels, flat)):
             self.rows[name].append(value)
         self.count += 1
         if len(self.rows["path_id"]) >= self.shard_rows:
@@ -161,6 +166,23 @@ def load_sequences(path: str | Path, limit: int | None = None) -> tuple[list[np.
     flat_l = labels.flatten().to_numpy().astype(np.int64)
     return ([flat_t[a:b] for a, b in zip(offsets[:-1], offsets[1:])],
             [flat_l[a:b] for a, b in zip(offsets[:-1], offsets[1:])])
+
+
+def load_features(path: str | Path, dim: int, limit: int | None = None) -> list[np.ndarray]:
+    """Per row of a dataset file, its continuous features ``(T, dim)`` (float32)."""
+    table = pq.read_table(str(path), columns=["tokens", "features"])
+    if limit is not None:
+        table = table.slice(0, limit)
+    column = table.column("features").combine_chunks()
+    offsets = column.offsets.to_numpy()
+    offsets = offsets - offsets[0]
+    flat = column.flatten().to_numpy().astype(np.float32)
+    out = [flat[a:b].reshape(-1, dim) for a, b in pairwise(offsets)]
+    lengths = [len(t) for t in table.column("tokens").to_pylist()]
+    bad = next((i for i, (f, n) in enumerate(zip(out, lengths)) if len(f) != n), None)
+    if bad is not None:
+        raise InputError(str(path), f"row {bad} has {len(out[bad])} feature rows of {dim} for {lengths[bad]} tokens")
+    return out
 
 
 MAX_OFFSET = 31  # offsets along an edge beyond this share the last class

@@ -22,7 +22,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from topoloc.io import atomic_path, write_json, write_text  # noqa: E402
-from topoloc.trajectory.dataset import load_sequences  # noqa: E402
+from topoloc.trajectory.dataset import load_features, load_sequences  # noqa: E402
 from topoloc.trajectory.model import load_model, predict  # noqa: E402
 
 log = logging.getLogger(__name__)
@@ -43,6 +43,25 @@ def accuracy_by_position(predictions: list[np.ndarray], labels: list[np.ndarray]
     rows = [{"position": str(i + 1), "n": int(count[i]), "accuracy": correct[i] / count[i]} for i in range(longest)]
     rows.append({"position": "last", "n": len(labels), "accuracy": last})
     return pd.DataFrame(rows)
+
+
+def accuracy_by_distance(predictions: list[np.ndarray], labels: list[np.ndarray], metres: list[np.ndarray],
+                         bin_m: float = 100.0) -> pd.DataFrame:
+    """Rows ``metres`` (upper edge of each ``bin_m`` bin of distance driven), ``n`` tokens in it, ``accuracy``.
+
+    ``metres``: per trajectory, the distance driven up to each token (from the ``distance`` feature).
+    """
+    pred = np.concatenate([np.asarray(p) == np.asarray(y) for p, y in zip(predictions, labels)]) if labels else np.zeros(0)
+    where = np.concatenate(metres) if metres else np.zeros(0)
+    bins = np.floor(where / bin_m).astype(int)
+    rows = [{"metres": float((b + 1) * bin_m), "n": int(np.sum(bins == b)), "accuracy": float(pred[bins == b].mean())}
+            for b in np.unique(bins)]
+    return pd.DataFrame(rows, columns=["metres", "n", "accuracy"])
+
+
+def driven_metres(inputs: list[np.ndarray], spacing_m: float) -> list[np.ndarray]:
+    """Distance driven up to each token, from the first feature column (metres since the last token / spacing)."""
+    return [np.cumsum(f[:, 0].astype(float)) * spacing_m for f in inputs]
 
 
 def prefix_majority(reference_tokens: list[np.ndarray], reference_labels: list[np.ndarray],
@@ -94,9 +113,24 @@ def plot_loss(history: pd.DataFrame, path: str, title: str) -> None:
     plt.close(fig)
 
 
-def plot_accuracy(tables: dict[str, pd.DataFrame], path: str, title: str, min_fraction: float = 0.01) -> None:
-    """Fig. 8b: accuracy against position; positions held by fewer than ``min_fraction`` of trajectories are cut."""
-    fig, ax = plt.subplots(figsize=(8, 4))
+def plot_accuracy(tables: dict[str, pd.DataFrame], path: str, title: str, min_fraction: float = 0.01,
+                  distances: dict[str, pd.DataFrame] | None = None) -> None:
+    """Fig. 8b: accuracy against position; positions held by fewer than ``min_fraction`` of trajectories are cut.
+
+    With ``distances`` (:func:`accuracy_by_distance` per split) a second panel shows accuracy against metres driven.
+    """
+    if distances:
+        fig, (ax, right) = plt.subplots(1, 2, figsize=(13, 4))
+        for name, table in distances.items():
+            keep = table[table.n >= min_fraction * table.n.max()]
+            right.plot(keep.metres, keep.accuracy, ".-", label=name)
+        right.set_xlabel("metres driven (bins of 100 m, upper edge)")
+        right.set_ylabel("accuracy over the tokens in the bin")
+        right.set_ylim(0, 1.02)
+        right.grid(alpha=0.3)
+        right.legend(loc="lower right")
+    else:
+        fig, ax = plt.subplots(figsize=(8, 4))
     shown = {}
     for name, table in tables.items():
         positions = table[table.position != "last"]
@@ -157,7 +191,13 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     model = load_model(inputs["model"])
     limit = conf["evaluate"]["max_train_trajectories"]
     data = {"train": load_sequences(inputs["train"], limit), "held-out": load_sequences(inputs["val"])}
-    tables = {split: accuracy_by_position(predict(model, tokens), labels) for split, (tokens, labels) in data.items()}
+    dim = int(model.hparams.get("feature_dim", 0))
+    features = {"train": load_features(inputs["train"], dim, limit), "held-out": load_features(inputs["val"], dim)} if dim else {}
+    predictions = {split: predict(model, tokens, inputs=features.get(split)) for split, (tokens, _) in data.items()}
+    tables = {split: accuracy_by_position(predictions[split], labels) for split, (_, labels) in data.items()}
+    spacing = json.loads(Path(inputs["graph_stats"]).read_text())["virtual_node_spacing_m"] if "graph_stats" in inputs else None
+    distances = {split: accuracy_by_distance(predictions[split], data[split][1], driven_metres(features[split], spacing))
+                 for split in data} if dim and spacing else {}
     if conf["evaluate"]["ceiling"]:
         reference = load_sequences(inputs["train"]) if limit is not None else data["train"]
         ref_tokens, ref_labels = reference[0] + data["held-out"][0], reference[1] + data["held-out"][1]
@@ -168,10 +208,14 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     frame = frame[["split", *(c for c in frame.columns if c != "split")]]
     with atomic_path(outputs["csv"]) as tmp:
         frame.to_csv(tmp, index=False)
-    write_text(outputs["table"], markdown_table(tables, region))
+    text = markdown_table(tables, region)
+    if distances:
+        merged = distances["train"].merge(distances["held-out"], on="metres", how="outer", suffixes=(" train", " held-out"))
+        text += f"\n# Accuracy against metres driven ({region})\n\n" + merged.to_markdown(index=False, floatfmt=".4f") + "\n"
+    write_text(outputs["table"], text)
     history = pd.read_csv(inputs["history"])
     plot_loss(history, outputs["loss_figure"], f"Fig. 8a: loss ({region}, {model.hparams.cell.upper()})")
-    plot_accuracy(tables, outputs["accuracy_figure"], f"Fig. 8b: accuracy vs position ({region})")
+    plot_accuracy(tables, outputs["accuracy_figure"], f"Fig. 8b: accuracy vs position ({region})", distances=distances)
     metrics: dict[str, float] = {}
     for split, table in tables.items():
         key = split.replace("-", "")
@@ -184,6 +228,11 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         for i in (1, 5, 10, 20, 40):
             if i <= len(positions):
                 metrics[f"{key}_acc_pos{i}"] = float(positions.accuracy.iloc[i - 1])
+    for split, table in distances.items():
+        for metres in (200.0, 500.0, 1000.0, 2000.0):
+            row = table[table.metres == metres]
+            if len(row):
+                metrics[f"{split.replace('-', '')}_acc_{metres:.0f}m"] = float(row.accuracy.iloc[0])
     training = json.loads(Path(inputs["train_metrics"]).read_text())
     metrics["train_seconds"] = float(training.get("train_seconds", float("nan")))
     write_json(outputs["metrics"], metrics)

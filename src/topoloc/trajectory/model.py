@@ -1,4 +1,8 @@
-"""The trajectory RNN: angle-token embedding -> one recurrent layer -> edge-class logits per step.
+"""The trajectory RNN: angle-token embedding (+ continuous features) -> one recurrent layer -> edge logits per step.
+
+With ``feature_dim`` > 0 each step's input is the token's embedding concatenated with its continuous
+features (:func:`topoloc.segmentation.token_features`: distance since the last token, unquantized turning
+angle, heading change), which keep the metric information the 20 angle bins round away.
 
 With ``state_loss_weight`` > 0 a second linear head on the same recurrent
 outputs is trained to predict the rest of the vehicle's position at each step
@@ -27,15 +31,16 @@ from torch.utils.data import DataLoader, Dataset, Sampler
 
 from topoloc.errors import InputError
 from topoloc.tracking import tracking_uri as default_uri
-from topoloc.trajectory.dataset import MAX_OFFSET, load_sequences, load_state_targets
+from topoloc.trajectory.dataset import MAX_OFFSET, load_features, load_sequences, load_state_targets
 
 IGNORE = -100
+CHECKPOINT_ARTIFACT = "checkpoint"
 CELLS = {"rnn": nn.RNN, "gru": nn.GRU, "lstm": nn.LSTM}
 SCHEDULES = ("constant", "onecycle", "plateau")
 
 
 class TrajectoryRNN(L.LightningModule):
-    """Embedding(bins + pad) -> RNN/GRU/LSTM -> Linear(num_edges)."""
+    """Embedding(bins + pad) [+ feature_dim continuous inputs] -> RNN/GRU/LSTM -> Linear(num_edges)."""
 
     def __init__(
         self,
@@ -52,6 +57,7 @@ class TrajectoryRNN(L.LightningModule):
         plateau_patience: int = 1,
         warmup_fraction: float = 0.15,
         state_loss_weight: float = 0.0,
+        feature_dim: int = 0,
     ) -> None:
         super().__init__()
         if cell not in CELLS:
@@ -60,25 +66,36 @@ class TrajectoryRNN(L.LightningModule):
             raise ValueError(f"lr_schedule must be one of {SCHEDULES}, got {lr_schedule!r}")
         self.save_hyperparameters()
         self.embedding = nn.Embedding(bins + 1, embedding_dim, padding_idx=bins)
-        self.rnn = CELLS[cell](embedding_dim, hidden_size, num_layers=1, batch_first=True)
+        self.rnn = CELLS[cell](embedding_dim + feature_dim, hidden_size, num_layers=1, batch_first=True)
         self.head = nn.Linear(hidden_size, num_edges)
         if state_loss_weight > 0:
             # auxiliary heads (training only): travel direction and offset along the edge
             self.state_head = nn.Linear(hidden_size, 2 + MAX_OFFSET + 1)
         self.loss = nn.CrossEntropyLoss(ignore_index=IGNORE)
 
-    def forward(self, tokens: torch.Tensor) -> torch.Tensor:
-        """Logits of shape ``(batch, steps, num_edges)`` for int tokens ``(batch, steps)``."""
-        return self.head(self.features(tokens))
+    def forward(self, tokens: torch.Tensor, inputs: torch.Tensor | None = None) -> torch.Tensor:
+        """Logits of shape ``(batch, steps, num_edges)`` for int tokens ``(batch, steps)`` and, with
+        ``feature_dim`` > 0, float features ``(batch, steps, feature_dim)`` (zeros when left out)."""
+        return self.head(self.features(tokens, inputs))
 
-    def features(self, tokens: torch.Tensor) -> torch.Tensor:
+    def step_input(self, tokens: torch.Tensor, inputs: torch.Tensor | None = None) -> torch.Tensor:
+        """The recurrent layer's input: the token embedding, and the continuous features beside it."""
+        embedded = self.embedding(tokens)
+        dim = int(self.hparams.get("feature_dim", 0))
+        if dim == 0:
+            return embedded
+        if inputs is None:
+            inputs = torch.zeros(*tokens.shape, dim, dtype=embedded.dtype, device=embedded.device)
+        return torch.cat([embedded, inputs.to(embedded.dtype)], dim=-1)
+
+    def features(self, tokens: torch.Tensor, inputs: torch.Tensor | None = None) -> torch.Tensor:
         """The recurrent layer's outputs ``(batch, steps, hidden_size)``."""
-        out, _ = self.rnn(self.embedding(tokens))
+        out, _ = self.rnn(self.step_input(tokens, inputs))
         return out
 
     def _step(self, batch: tuple[torch.Tensor, ...], stage: str) -> torch.Tensor:
-        tokens, labels, lengths, *state = batch
-        features = self.features(tokens)
+        tokens, labels, lengths, inputs, *state = batch
+        features = self.features(tokens, inputs)
         logits = self.head(features)
         loss = edge_loss = self.loss(logits.reshape(-1, logits.shape[-1]), labels.reshape(-1))
         if state and self.hparams.state_loss_weight > 0:
@@ -127,11 +144,15 @@ class TrajectoryRNN(L.LightningModule):
 
 
 class Sequences(Dataset):
-    """Token and label sequences (numpy int arrays) of one split, optionally with per-step state targets."""
+    """Token and label sequences (numpy int arrays) of one split, their continuous features ``(T, F)`` (F may
+    be 0), optionally with per-step state targets."""
 
-    def __init__(self, tokens: Sequence[np.ndarray], labels: Sequence[np.ndarray], *targets: Sequence[np.ndarray]) -> None:
+    def __init__(self, tokens: Sequence[np.ndarray], labels: Sequence[np.ndarray], inputs: Sequence[np.ndarray],
+                 *targets: Sequence[np.ndarray]) -> None:
         self.tokens = [torch.as_tensor(t, dtype=torch.long) for t in tokens]
-        self.columns = [self.tokens] + [[torch.as_tensor(x, dtype=torch.long) for x in column] for column in (labels, *targets)]
+        self.columns = ([self.tokens, [torch.as_tensor(x, dtype=torch.long) for x in labels],
+                         [torch.as_tensor(x, dtype=torch.float32) for x in inputs]]
+                        + [[torch.as_tensor(x, dtype=torch.long) for x in column] for column in targets])
 
     def __len__(self) -> int:
         return len(self.tokens)
@@ -168,23 +189,28 @@ class LengthBucketBatches(Sampler[list[int]]):
 
 
 def pad_batch(items: Sequence[tuple[torch.Tensor, ...]], pad_token: int) -> tuple[torch.Tensor, ...]:
-    """Right-pad a batch: tokens with ``pad_token``, labels (and targets) with :data:`IGNORE`; plus the lengths.
+    """Right-pad a batch of ``(tokens, labels, features, *targets)``: tokens with ``pad_token``, features with
+    0, labels (and targets) with :data:`IGNORE`; plus the lengths.
 
-    Returns ``(tokens, labels, lengths, *targets)``.
+    Returns ``(tokens, labels, lengths, features, *targets)``.
     """
     columns = list(zip(*items))
     tokens = nn.utils.rnn.pad_sequence(list(columns[0]), batch_first=True, padding_value=pad_token)
-    rest = [nn.utils.rnn.pad_sequence(list(column), batch_first=True, padding_value=IGNORE) for column in columns[1:]]
+    labels = nn.utils.rnn.pad_sequence(list(columns[1]), batch_first=True, padding_value=IGNORE)
+    inputs = nn.utils.rnn.pad_sequence(list(columns[2]), batch_first=True, padding_value=0.0)
+    rest = [nn.utils.rnn.pad_sequence(list(column), batch_first=True, padding_value=IGNORE) for column in columns[3:]]
     lengths = torch.tensor([len(t) for t in columns[0]], dtype=torch.long)
-    return tokens, rest[0], lengths, *rest[1:]
+    return tokens, labels, lengths, inputs, *rest
 
 
 class TrajectoryData(L.LightningDataModule):
     """Train and validation sequences from the dataset stage's Parquet files."""
 
     def __init__(self, train_path: str, val_path: str, bins: int, batch_size: int, seed: int = 0,
-                 bucket_by_length: bool = True, state_targets: bool = False, num_workers: int = 0) -> None:
+                 bucket_by_length: bool = True, state_targets: bool = False, num_workers: int = 0,
+                 feature_dim: int = 0) -> None:
         super().__init__()
+        self.feature_dim = feature_dim
         self.train_path, self.val_path, self.bucket_by_length = train_path, val_path, bucket_by_length
         self.state_targets = state_targets
         self.bins, self.batch_size, self.seed, self.num_workers = bins, batch_size, seed, num_workers
@@ -194,8 +220,14 @@ class TrajectoryData(L.LightningDataModule):
     def setup(self, stage: str | None = None) -> None:
         if self.train is None:
             extra = (lambda path: load_state_targets(path)) if self.state_targets else (lambda path: ())
-            self.train = Sequences(*load_sequences(self.train_path), *extra(self.train_path))
-            self.val = Sequences(*load_sequences(self.val_path), *extra(self.val_path))
+            self.train = self._load(self.train_path, extra)
+            self.val = self._load(self.val_path, extra)
+
+    def _load(self, path: str, extra: Any) -> Sequences:
+        tokens, labels = load_sequences(path)
+        inputs = (load_features(path, self.feature_dim) if self.feature_dim
+                  else [np.zeros((len(t), 0), np.float32) for t in tokens])
+        return Sequences(tokens, labels, inputs, *extra(path))
 
     def _collate(self, items: Sequence[tuple[torch.Tensor, ...]]) -> tuple[torch.Tensor, ...]:
         return pad_batch(items, self.bins)
@@ -214,8 +246,9 @@ class TrajectoryData(L.LightningDataModule):
 
 
 @torch.no_grad()
-def predict(model: TrajectoryRNN, tokens: Sequence[np.ndarray], batch_size: int = 512) -> list[np.ndarray]:
-    """Predicted edge id at every step of every sequence."""
+def predict(model: TrajectoryRNN, tokens: Sequence[np.ndarray], batch_size: int = 512,
+            inputs: Sequence[np.ndarray] | None = None) -> list[np.ndarray]:
+    """Predicted edge id at every step of every sequence (``inputs``: their features, for a model with some)."""
     model.eval()
     bins = model.hparams.bins
     out: list[np.ndarray] = []
@@ -224,7 +257,9 @@ def predict(model: TrajectoryRNN, tokens: Sequence[np.ndarray], batch_size: int 
     for start in range(0, len(order), batch_size):
         idx = order[start:start + batch_size]
         batch = nn.utils.rnn.pad_sequence([torch.as_tensor(tokens[i], dtype=torch.long) for i in idx], batch_first=True, padding_value=bins)
-        arg = model(batch.to(model.device)).argmax(-1).cpu().numpy()
+        feats = None if inputs is None else nn.utils.rnn.pad_sequence(
+            [torch.as_tensor(inputs[i], dtype=torch.float32) for i in idx], batch_first=True).to(model.device)
+        arg = model(batch.to(model.device), feats).argmax(-1).cpu().numpy()
         for row, i in enumerate(idx):
             preds[int(i)] = arg[row, : len(tokens[i])]
     out = [preds[i] for i in range(len(tokens))]
@@ -246,6 +281,8 @@ def load_model(spec: str, tracking_uri: str | None = None) -> Any:
             raise InputError(spec, f"not a trajectory RNN checkpoint ({type(err).__name__}: {str(err).splitlines()[0][:120]})") from err
     uri = spec if "://" in spec or spec.startswith(("runs:/", "models:/")) else f"runs:/{spec}/model"
     import mlflow  # only for run ids and model URIs: MLflow is slow to import
+    import mlflow.artifacts
+    import mlflow.exceptions
 
     store = tracking_uri or default_uri()
     if store.startswith("sqlite:///"):
@@ -253,9 +290,29 @@ def load_model(spec: str, tracking_uri: str | None = None) -> Any:
         if not db.is_file():
             raise InputError(spec, f"no MLflow store at {db} to look up the run id in (set --tracking-uri or MLFLOW_TRACKING_URI)")
     mlflow.set_tracking_uri(store)
+    if uri.startswith("runs:/"):  # the Lightning checkpoint the stage logged beside the model (log_checkpoint)
+        run_id = uri[len("runs:/"):].split("/")[0]
+        try:
+            local = mlflow.artifacts.download_artifacts(run_id=run_id, artifact_path=f"{CHECKPOINT_ARTIFACT}/model.ckpt")
+        except (mlflow.exceptions.MlflowException, OSError):  # no such run or no checkpoint: try the logged model
+            local = None
+        if local is not None:
+            return TrajectoryRNN.load_from_checkpoint(local, map_location="cpu").eval()
     try:
         model = mlflow.pytorch.load_model(uri, map_location="cpu")
     except Exception as err:  # MlflowException and OSError for unknown runs, models and artifacts
         first = str(err).splitlines()[0][:160] if str(err) else type(err).__name__
         raise InputError(spec, f"no trajectory model at {uri} in the MLflow store {store.split('?')[0]} ({first})") from err
+    if not isinstance(model, TrajectoryRNN):  # recent MLflow logs an exported graph: no hyper-parameters, no states
+        raise InputError(spec, f"{uri} is a {type(model).__name__}, not the trajectory RNN: load its run's checkpoint "
+                               f"({CHECKPOINT_ARTIFACT}/model.ckpt) or the stage's model.ckpt")
     return model.eval()
+
+
+def log_checkpoint(path: str | Path) -> None:
+    """Attach the checkpoint ``path`` to the active MLflow run as ``checkpoint/model.ckpt``, what
+    :func:`load_model` of a run id loads (the MLflow model alone may be an exported graph without the
+    hyper-parameters and recurrent states the localizers need)."""
+    import mlflow
+
+    mlflow.log_artifact(str(path), CHECKPOINT_ARTIFACT)

@@ -21,12 +21,12 @@ from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json
 from topoloc.training import FitSettings, LoggedModel
 from topoloc.training import fit as fit_module
-from topoloc.trajectory.model import TrajectoryData, TrajectoryRNN
+from topoloc.trajectory.model import TrajectoryData, TrajectoryRNN, log_checkpoint
 
 log = logging.getLogger(__name__)
 
 
-def build_model(conf: dict[str, Any], num_edges: int) -> TrajectoryRNN:
+def build_model(conf: dict[str, Any], num_edges: int, feature_dim: int = 0) -> TrajectoryRNN:
     """The network of ``conf['model']`` with the optimizer of ``conf['train']``."""
     model, train = conf["model"], conf["train"]
     if train["optimizer"] not in ("adam", "sgd"):
@@ -45,12 +45,16 @@ def build_model(conf: dict[str, Any], num_edges: int) -> TrajectoryRNN:
         plateau_patience=int(train["lr_plateau_patience"]),
         warmup_fraction=float(train["warmup_fraction"]),
         state_loss_weight=float(train["state_loss_weight"]),
+        feature_dim=feature_dim,
     )
 
 
 def fit(conf: dict[str, Any], train_path: str, val_path: str, num_edges: int, model_path: str,
-        fast_dev_run: bool = False, log_model: bool = False) -> tuple[TrajectoryRNN, pd.DataFrame, dict[str, float]]:
+        fast_dev_run: bool = False, log_model: bool = False,
+        feature_dim: int = 0) -> tuple[TrajectoryRNN, pd.DataFrame, dict[str, float]]:
     """Train; write the best checkpoint to ``model_path``; return the model, the history and metrics.
+
+    ``feature_dim``: continuous features per token in the dataset (its ``stats.json``), fed beside the token.
 
     Inside an active MLflow run the metrics go to it, and with ``log_model`` the model too.
     """
@@ -58,7 +62,7 @@ def fit(conf: dict[str, Any], train_path: str, val_path: str, num_edges: int, mo
     bins = int(conf["encoding"]["angle_bins"])
     data = TrajectoryData(train_path, val_path, bins, int(train["batch_size"]), int(train["seed"]),
                           bucket_by_length=bool(train["bucket_by_length"]),
-                          state_targets=float(train["state_loss_weight"]) > 0)
+                          state_targets=float(train["state_loss_weight"]) > 0, feature_dim=feature_dim)
     data.setup()
     if len(data.train) == 0:
         raise InputError(train_path, "empty training set (dataset stage produced no training paths)")
@@ -68,10 +72,17 @@ def fit(conf: dict[str, Any], train_path: str, val_path: str, num_edges: int, mo
     settings = FitSettings.from_config(train, gradient_clip=train["gradient_clip"], sanity_val_steps=2,
                                        early_stopping_patience=int(patience) if patience is not None else None,
                                        fast_dev_run=fast_dev_run)
-    result = fit_module(lambda: build_model(conf, num_edges), data, settings, model_path,
+    result = fit_module(lambda: build_model(conf, num_edges, feature_dim), data, settings, model_path,
                         logged_model=LoggedModel(signature_example(bins), free_axes=2) if log_model else None)
     metrics = result.metrics | {"train_size": float(len(data.train)), "val_size": float(len(data.val))}
     return result.module, result.history, metrics
+
+
+def mlflow_active() -> bool:
+    """Whether an MLflow run is active (the stage's)."""
+    import mlflow
+
+    return mlflow.active_run() is not None
 
 
 def signature_example(bins: int) -> np.ndarray:
@@ -83,7 +94,9 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     """Train on ``inputs`` train/val/stats; write ``model``, ``history`` and ``metrics``."""
     stats = json.loads(Path(inputs["stats"]).read_text())
     _, history, metrics = fit(conf, inputs["train"], inputs["val"], int(stats["classes"]), outputs["model"],
-                              log_model=conf["train"]["log_model"])
+                              log_model=conf["train"]["log_model"], feature_dim=int(stats.get("feature_dim", 0)))
+    if conf["train"]["log_model"] and mlflow_active():
+        log_checkpoint(outputs["model"])
     with atomic_path(outputs["history"]) as tmp:
         history.to_csv(tmp, index=False)
     write_json(outputs["metrics"], metrics)

@@ -1,0 +1,179 @@
+"""The metric filter at city scale: coarse cells while the belief is broad, the full grid once it is not.
+
+On a city map (Heidelberg: 1.3 million cells of 2 m) a belief spread over the whole map costs about 0.2 s
+per 2 m step: slower than a car drives. A filter therefore starts on a *coarse* model of the same map
+(:class:`~topoloc.localization.metric.MetricModel` with cells ``coarse_factor`` times longer, on the same
+chains, so that every fine cell lies in one coarse cell): a coarse step is taken every ``coarse_factor``
+fine steps (net, so reversing counts back), with the yaw at that moment; ``coarse_factor`` 4 costs about
+16 times less per metre. The coarse model is more tolerant (heading spread and turn spread doubled, the
+distance jitter scaled to the same variance per metre, no scale classes), so that the truth is not
+pruned for being up to half a coarse cell off. Once the coarse belief of a filter holds at most
+``coarse_handoff_cells`` positions (counted in fine cells), it is handed to the fine filter at a coarse
+step: each coarse entry's mass is spread over the fine cells it covers (by their length), with its heading
+offset belief; from there the filter is the dense one (:class:`~topoloc.localization.metric_filter.MetricFilter`).
+A fine filter that gets lost (more likely off the map than on it) goes back to the coarse phase with its
+belief summed into coarse cells, and the coarse filter spreads the returning mass over the map.
+
+Maps of at most ``coarse_min_cells`` cells (every map before city scale) never use the coarse phase: the
+answers are the dense filter's, bit for bit. :class:`CityFilter` has the interface of
+:class:`MetricFilter` that the localizer uses (``reset``, ``update``, ``answers``, ``answer``, ``trace``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numpy.typing import NDArray
+
+from topoloc.localization.metric import MetricModel, MetricSettings, concentration, resultant_length
+from topoloc.localization.metric_filter import COMPLEX, REAL, TINY, Estimate, MetricFilter
+
+#: The coarse model's heading spread and turn spread, as multiples of the fine model's.
+COARSE_SPREAD = 2.0
+
+
+def coarse_settings(settings: MetricSettings) -> MetricSettings:
+    """The settings of the coarse model that goes with ``settings`` (see the module docstring)."""
+    k = settings.coarse_factor
+    return dataclasses.replace(settings, cell_m=settings.cell_m * k, step_jitter=settings.step_jitter / k,
+                               heading_sigma_deg=COARSE_SPREAD * settings.heading_sigma_deg,
+                               turn_sigma_share=COARSE_SPREAD * settings.turn_sigma_share, scale_classes=1, coarse_factor=1)
+
+
+def uses_coarse(settings: MetricSettings, fine_cells: int) -> bool:
+    """Whether a map of ``fine_cells`` cells is run with a coarse phase."""
+    return settings.coarse_factor > 1 and fine_cells > settings.coarse_min_cells
+
+
+class CityFilter:
+    """Filters of one drive's starts, each on the coarse model while broad and on the fine one after."""
+
+    def __init__(self, fine: MetricModel, coarse: MetricModel | None, filters: int = 1) -> None:
+        self.model, self.grid, self.filters = fine, fine.grid, int(filters)
+        self.fine = MetricFilter(fine, self.filters)
+        self.coarse = MetricFilter(coarse, self.filters) if coarse is not None else None
+        self.in_coarse = np.zeros(self.filters, bool)
+        if coarse is None:
+            return
+        self.factor = int(fine.settings.coarse_factor)
+        self.handoff = max(1, int(fine.settings.coarse_handoff_cells) // self.factor)  # in coarse entries
+        self.level, self.coarse_level = 0, 0  # net fine steps driven, and net coarse steps
+        fg, cg = fine.grid, coarse.grid
+        index = np.floor(fg.offset / np.maximum(cg.cell_len[fg.chain], TINY)).astype(np.int64)
+        count = cg.base[fg.chain + 1] - cg.base[fg.chain]
+        self.coarse_of = cg.base[fg.chain] + np.clip(index, 0, np.maximum(count - 1, 0))  # fine cell -> coarse cell
+        self.order = np.argsort(self.coarse_of, kind="stable")  # fine cells by coarse cell: a CSR list
+        self.ptr = np.searchsorted(self.coarse_of[self.order], np.arange(cg.num_cells + 1))
+        share = fg.cell_len[fg.chain] / np.maximum(cg.cell_len[cg.chain[self.coarse_of]], TINY)
+        self.share = (share / np.maximum(np.bincount(self.coarse_of, weights=share, minlength=cg.num_cells), TINY)[self.coarse_of])
+        centre = np.abs(fg.offset - cg.offset[self.coarse_of])  # the fine cell nearest each coarse cell's centre
+        best = np.lexsort((centre, self.coarse_of))
+        self.fine_of = np.full(cg.num_cells, -1, np.int64)
+        self.fine_of[self.coarse_of[best[::-1]]] = best[::-1]
+
+    @property
+    def num_cells(self) -> int:
+        return self.grid.num_cells
+
+    # -- life cycle ------------------------------------------------------------------------------------------
+
+    def reset(self, which: int | NDArray[np.int64] | None = None) -> None:
+        """(Re)start filters ``which`` (default: all), uniform over the map; on a city map in the coarse phase."""
+        which = np.arange(self.filters) if which is None else np.atleast_1d(np.asarray(which, np.int64))
+        if self.coarse is None:
+            self.fine.reset(which)
+            return
+        self.fine.stop(which)
+        for b in which:
+            self.fine.history[int(b)] = []
+        self.coarse.reset(which)
+        self.in_coarse[which] = True
+
+    def _to_fine(self, b: int) -> None:
+        """Hand filter ``b``'s coarse belief to the fine filter (mass spread over the fine cells it covers)."""
+        last_yaw = float(self.coarse.last_yaw[b])
+        offmap = float(self.coarse.offmap[b])
+        cell, weight, kappa, mean = self.coarse.take(b)
+        counts = self.ptr[cell + 1] - self.ptr[cell]
+        owner = np.repeat(np.arange(len(cell)), counts)
+        idx = np.repeat(self.ptr[cell], counts) + (np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
+        fine = self.order[idx]
+        self.fine.seed(b, fine, weight[owner] * self.share[fine], kappa[owner], mean[owner], offmap, last_yaw)
+        self.in_coarse[b] = False
+
+    def _to_coarse(self, b: int) -> None:
+        """Send a lost fine filter ``b`` back to the coarse phase (its belief summed into coarse cells)."""
+        history = self.fine.history[b]
+        offmap, last_yaw = float(self.fine.offmap[b]), float(self.fine.last_yaw[b])
+        cell, weight, kappa, mean = self.fine.take(b)
+        self.fine.history[b] = history
+        n = self.coarse.num_cells
+        coarse = self.coarse_of[cell]
+        total = np.bincount(coarse, weights=weight, minlength=n)
+        flow = weight * resultant_length(kappa) * mean
+        resultant = np.bincount(coarse, weights=flow.real, minlength=n) + 1j * np.bincount(coarse, weights=flow.imag, minlength=n)
+        cells = np.flatnonzero(total > 0)
+        length = np.abs(resultant[cells])
+        self.coarse.seed(b, cells, total[cells], concentration(length / total[cells]).astype(REAL),
+                         np.where(length > 0, resultant[cells] / np.maximum(length, TINY), 1.0).astype(COMPLEX),
+                         offmap, last_yaw)
+        self.in_coarse[b] = True
+
+    # -- one step --------------------------------------------------------------------------------------------
+
+    def update(self, direction: int, yaw: float) -> None:
+        """One fine step (``cell_m`` forward or back, the odometry's ``yaw``) for every running filter."""
+        if self.coarse is None:
+            self.fine.update(direction, yaw)
+            return
+        for b in np.flatnonzero(self.fine.running & (self.fine.offmap >= 0.5) & (self.fine.settings.enter_prob > 0)):
+            self._to_coarse(int(b))
+        self.level += 1 if direction > 0 else -1
+        coarse_step = 0
+        if self.level >= (self.coarse_level + 1) * self.factor:
+            coarse_step = 1
+        elif self.level <= (self.coarse_level - 1) * self.factor:
+            coarse_step = -1
+        if coarse_step:
+            self.coarse_level += coarse_step
+            if self.coarse.running.any():
+                self.coarse.update(coarse_step, yaw)
+            counts = np.bincount(self.coarse.group // self.coarse.classes, minlength=self.filters)
+            for b in np.flatnonzero(self.in_coarse & self.coarse.running & (counts <= self.handoff)):
+                self._to_fine(int(b))
+        for b in np.flatnonzero(self.in_coarse):
+            self.fine.history[int(b)].append((int(direction), float(yaw), None))
+        if self.fine.running.any():
+            self.fine.update(direction, yaw)
+
+    # -- answers ---------------------------------------------------------------------------------------------
+
+    def answers(self) -> list[Estimate]:
+        """Per filter: the road of largest probability, its most probable cell (a fine cell), that probability."""
+        out = self.fine.answers()
+        if self.coarse is None or not self.in_coarse.any():
+            return out
+        coarse = self.coarse.answers()
+        for b in np.flatnonzero(self.in_coarse):
+            est = coarse[b]
+            out[b] = Estimate(est.edge, int(self.fine_of[est.cell]) if est.cell >= 0 else -1, est.xy, est.confidence, est.offmap)
+        return out
+
+    def answer(self, which: int = 0) -> Estimate:
+        """The answer of filter ``which``."""
+        return self.answers()[which]
+
+    def trace(self, which: int = 0) -> NDArray[np.int64]:
+        """Filter ``which``'s path traced back (fine cells; -1 throughout while it is still in the coarse phase)."""
+        if self.in_coarse[which]:
+            return np.full(len(self.fine.history[which]), -1, np.int64)
+        return self.fine.trace(which)
+
+    def belief(self, which: int = 0) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+        """Filter ``which``'s belief: map positions (n, 2) of its cells, their probabilities, the off-map probability."""
+        bank = self.coarse if self.in_coarse[which] else self.fine
+        mine = bank.group // bank.classes == which
+        cells, inverse = np.unique(bank.cell[mine], return_inverse=True)
+        weight = np.bincount(inverse, weights=bank.weight[mine].astype(np.float64), minlength=len(cells))
+        return bank.grid.xy[cells], weight, float(bank.offmap[which])

@@ -1,0 +1,61 @@
+"""The learned localizer decoded on the map: the trajectory RNN's per-token road distribution as the evidence
+of a filter on the map's connectivity (config ``localization.rnn_filter``).
+
+The filter is the token HMM of :mod:`topoloc.localization.hmm` (cells of directed roads, one token moves
+the vehicle one virtual-node spacing along the roads that may follow, the token's turning angle against the
+map's): its motion prior keeps the answer on a connected, drivable sequence, and its reset mass lets it
+recover. At every token the RNN's log-probability of each road, ``w * max(log p, log floor)``
+(``evidence_weight`` ``w``, ``floor``), is added to the log-likelihood of every cell of that road. The RNN's
+answer is a posterior given all tokens so far, so it is tempered (``w`` < 1) rather than multiplied in at
+full weight every step. The RNN runs in windows of ``window`` tokens every ``stride``
+(:class:`topoloc.localization.rnn.OnlineRNN`; ``window: null`` one pass), with the continuous per-token
+features when the model was trained with them.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from topoloc.errors import InputError
+from topoloc.localization.hmm import CellHMM, HmmParams
+from topoloc.localization.rnn import OnlineRNN, check_model
+from topoloc.localization.roadmap import Observations, Odometry, RoadMap, token_observations
+from topoloc.localizer import Answer, register
+from topoloc.localizers.hmm import HmmBaseline
+
+
+@register
+class RnnFilter(HmmBaseline):
+    """HMM forward filter over cells of directed roads whose evidence is the RNN's road distribution; Viterbi path."""
+
+    name, label, observes, requires_model = "rnn_filter", "RNN + map filter", "tokens", True
+
+    def setup(self, map: RoadMap, conf: dict[str, Any]) -> None:
+        check_model(map, self.name)
+        settings = conf["localization"]["rnn_filter"]
+        self.bins = int(map.model.hparams.bins)
+        params = HmmParams.from_conf(conf["localization"]["hmm"])
+        self.hmm = map.cached(("hmm", params, self.bins), lambda: CellHMM(map.graph, map.states, self.bins, params))
+        self.rnn = OnlineRNN(map.model, settings["window"], settings["stride"])
+        self.weight = float(settings["evidence_weight"])
+        self.log_floor = float(np.log(float(settings["floor"])))
+        self.feature_dim = int(map.model.hparams.get("feature_dim", 0))
+
+    def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
+        """The drive's tokens, each with its continuous features: ``(token, features)``."""
+        obs = token_observations(odometry, map, conf, int(map.model.hparams.bins))
+        return Observations([(int(t), f) for t, f in zip(obs.items, obs.extra["features"])], obs.frame, obs.extra)
+
+    def start(self) -> None:
+        super().start()
+        self.rnn.start()
+
+    def update(self, observation: Any) -> Answer:
+        token, inputs = observation if isinstance(observation, tuple) else (observation, None)
+        if not 0 <= int(token) < self.bins:
+            raise InputError("tokens", f"tokens must lie in [0, {self.bins}) for this model, got {token}")
+        logp = self.rnn.step(int(token), inputs if self.feature_dim else None)
+        evidence = self.weight * np.maximum(logp.astype(float), self.log_floor)[self.hmm.cell_edge]
+        return self._step(int(token), evidence)

@@ -1,0 +1,112 @@
+"""The metric filter's coarse phase (city scale) against the dense filter, on a small map where both run."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+from localization_helpers import irregular_grid
+from test_metric import NOISELESS, score
+
+from topoloc.config import load
+from topoloc.localization.city_filter import CityFilter, coarse_settings, uses_coarse
+from topoloc.localization.metric import MetricModel, MetricSettings
+from topoloc.localization.metric_filter import MetricFilter
+from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.localization.simulation import NOISE_LEVELS, simulate
+from topoloc.registry import make
+
+
+@pytest.fixture(scope="module")
+def grid():
+    graph, _ = irregular_grid()
+    return graph, RoadMap(graph), {k: load(None)[k] for k in ("localization", "segmentation", "encoding")}
+
+
+def coarse_conf(conf: dict, handoff: int = 400) -> dict:
+    """``conf`` with the coarse phase forced on this small map (it has about 3,600 cells)."""
+    out = copy.deepcopy(conf)
+    out["localization"]["metric"].update(coarse_min_cells=0, coarse_handoff_cells=handoff)
+    return out
+
+
+def run(road, conf, sim):
+    localizer = make("metric")
+    observations = localizer.observe(Odometry(sim.odo_xy, sim.odo_yaw), road, conf)
+    localizer.reset(road, conf)
+    track = localizer.run(observations.items)
+    return localizer, observations, track
+
+
+def test_small_maps_run_the_dense_filter_unchanged(grid):
+    graph, road, conf = grid
+    settings = MetricSettings.from_conf(conf["localization"]["metric"])
+    model = MetricModel(graph, road.states, settings)
+    assert not uses_coarse(settings, model.num_cells) and uses_coarse(settings, 10**6)
+    sim = simulate(graph, 500.0, NOISE_LEVELS["medium"], np.random.default_rng(7))
+    steps = make("metric").observe(Odometry(sim.odo_xy, sim.odo_yaw), road, conf).items
+    dense, city = MetricFilter(model), CityFilter(model, None)
+    dense.reset()
+    city.reset()
+    for direction, yaw in steps:
+        dense.update(direction, yaw)
+        city.update(direction, yaw)
+        a, b = dense.answer(), city.answer()
+        assert (a.edge, a.cell, a.confidence) == (b.edge, b.cell, b.confidence)
+    assert (dense.trace() == city.trace()).all()
+
+
+@pytest.mark.parametrize("level, seed", [("none", 1), ("medium", 2), ("high", 3)])
+def test_coarse_phase_gives_the_dense_filters_answers(grid, level, seed):
+    graph, road, conf = grid
+    sim = simulate(graph, 1500.0, NOISELESS if level == "none" else NOISE_LEVELS[level], np.random.default_rng(seed))
+    _, observations, dense = run(road, conf, sim)
+    localizer, _, city = run(road, coarse_conf(conf), sim)
+    assert localizer.coarse_model is not None and localizer.coarse_model.settings.cell_m == 8.0
+    m_dense, m_city = score(graph, sim, observations, dense), score(graph, sim, observations, city)
+    # coarse cells lose some of the curves' detail while broad: localized up to a quarter later (on this map)
+    assert np.isfinite(m_city["localized_m"]) and m_city["localized_m"] <= 1.25 * m_dense["localized_m"] + 50.0, (m_dense, m_city)
+    assert m_city["accuracy_after"] >= 0.97 and m_city["confident_wrong"] <= 0.02, m_city
+    later = np.arange(len(dense.state)) >= 0.6 * len(dense.state)  # once both are sure: the same roads and positions
+    assert np.mean(dense.state[later] == city.state[later]) >= 0.99
+    assert np.nanmedian(np.hypot(*(dense.xy[later] - city.xy[later]).T)) <= 1.0
+
+
+def test_coarse_phase_hands_over_and_back(grid):
+    graph, road, conf = grid
+    settings = MetricSettings.from_conf(coarse_conf(conf)["localization"]["metric"])
+    fine = MetricModel(graph, road.states, settings)
+    coarse = MetricModel(graph, road.states, coarse_settings(settings))
+    bank = CityFilter(fine, coarse, filters=2)
+    assert coarse.num_cells * 3 < fine.num_cells
+    assert (np.bincount(bank.coarse_of, minlength=coarse.num_cells) > 0).all()  # every coarse cell covers fine cells
+    assert np.allclose(np.bincount(bank.coarse_of, weights=bank.share), 1.0)
+    sim = simulate(graph, 1200.0, NOISE_LEVELS["medium"], np.random.default_rng(4))
+    steps = make("metric").observe(Odometry(sim.odo_xy, sim.odo_yaw), road, conf).items
+    bank.reset([0, 1])
+    phases = []
+    for direction, yaw in steps:
+        bank.update(direction, yaw)
+        phases.append(bank.in_coarse.copy())
+        xy, weight, offmap = bank.belief(0)
+        assert abs(weight.sum() + offmap - 1.0) < 1e-4
+    phases = np.array(phases)
+    assert phases[0].all() and not phases[-1].any()  # coarse at first, fine once the belief narrowed
+    assert len(bank.trace(0)) == len(steps) and (bank.trace(0)[-50:] >= 0).all()
+
+    # then the drive leaves the map (turns of 40 degrees every 15 m, which no road makes): the fine filter gets
+    # lost and goes back to coarse cells
+    yaw = sim.odo_yaw[-1] + np.radians(40.0) * np.where((np.arange(400) // 15) % 2 == 0, 1.0, -1.0)
+    xy = sim.odo_xy[-1] + np.cumsum(np.column_stack([np.cos(yaw), np.sin(yaw)]), axis=0)
+    odometry = Odometry(np.vstack([sim.odo_xy, xy]), np.concatenate([sim.odo_yaw, yaw]))
+    lost = CityFilter(fine, coarse)
+    lost.reset()
+    phases, sure = [], []
+    for direction, yaw in make("metric").observe(odometry, road, conf).items:
+        lost.update(direction, yaw)
+        phases.append(lost.in_coarse[0])
+        sure.append(lost.answer().confidence >= 0.9)
+    phases, sure = np.array(phases), np.array(sure)
+    assert not phases[len(steps) - 1] and phases[-1]  # fine at the end of the drive on the map, coarse again off it
+    assert not sure[-50:].any()

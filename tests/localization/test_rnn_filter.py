@@ -1,0 +1,75 @@
+"""The learned localizer decoded on the map (rnn_filter): the HMM when the RNN has no say, the RNN's evidence otherwise."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from localization_helpers import irregular_grid
+
+from topoloc.config import load
+from topoloc.errors import InputError
+from topoloc.localization.rnn import OnlineRNN, edge_log_probs
+from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.registry import make, registry
+from topoloc.trajectory.model import TrajectoryRNN
+
+
+@pytest.fixture(scope="module")
+def setting():
+    graph, _ = irregular_grid()
+    torch.manual_seed(0)
+    model = TrajectoryRNN(20, graph.num_edges, cell="lstm", hidden_size=16, embedding_dim=8, feature_dim=3).eval()
+    conf = {k: load(None)[k] for k in ("localization", "segmentation", "encoding")}
+    # a drive along the bottom row then up the right side: x 0 -> 400 at y = 0, then y 0 -> 340 at x = 400
+    xy = np.vstack([np.column_stack([np.arange(0.0, 400.0), np.zeros(400)]),
+                    np.column_stack([np.full(340, 400.0), np.arange(0.0, 340.0)])])
+    return graph, model, conf, Odometry.from_track(xy)
+
+
+def test_observations_carry_features_and_the_online_rnn_equals_the_batch(setting):
+    graph, model, conf, odometry = setting
+    road = RoadMap(graph, model=model)
+    localizer = make("rnn_filter")
+    obs = localizer.observe(odometry, road, conf)
+    assert registry()["rnn_filter"].requires_model and len(obs) > 10
+    tokens = np.array([t for t, _ in obs.items])
+    inputs = np.stack([f for _, f in obs.items])
+    assert inputs.shape == (len(tokens), 3) and inputs[:, 0].sum() * graph.virtual_node_spacing_m == pytest.approx(740, rel=0.05)
+    online = OnlineRNN(model)
+    steps = np.stack([online.step(int(t), f) for t, f in zip(tokens, inputs)])
+    assert np.allclose(steps, edge_log_probs(model, tokens, inputs=inputs), atol=1e-5)
+    assert not np.allclose(steps, edge_log_probs(model, tokens))  # without the features the outputs differ
+
+
+def test_without_evidence_it_is_the_hmm_and_with_it_it_follows_the_rnn(setting):
+    graph, model, conf, odometry = setting
+    road = RoadMap(graph, model=model)
+    hmm, learned = make("hmm"), make("rnn_filter")
+    obs = learned.observe(odometry, road, conf)
+    silent = {**conf, "localization": {**conf["localization"], "rnn_filter": {**conf["localization"]["rnn_filter"],
+                                                                              "evidence_weight": 0.0}}}
+    learned.reset(road, silent)
+    track = learned.run(obs.items)
+    hmm.reset(road, conf)
+    base = hmm.run([t for t, _ in obs.items])
+    assert track.state.tolist() == base.state.tolist() and track.path.tolist() == base.path.tolist()
+    assert learned.explained(obs.items) == hmm.explained([t for t, _ in obs.items])
+    # a model sure of road 7 whatever it sees: with full weight the filter ends there, the HMM elsewhere
+    sure = TrajectoryRNN(20, graph.num_edges, cell="lstm", hidden_size=16, embedding_dim=8, feature_dim=3).eval()
+    with torch.no_grad():
+        sure.head.weight.zero_()
+        sure.head.bias.zero_()
+        sure.head.bias[7] = 20.0
+    loud = {**conf, "localization": {**conf["localization"], "rnn_filter": {**conf["localization"]["rnn_filter"],
+                                                                            "evidence_weight": 1.0}}}
+    other = make("rnn_filter")
+    other.reset(RoadMap(graph, model=sure), loud)
+    assert other.run(obs.items).state[-1] == 7 != base.state[-1]
+
+
+def test_a_model_of_another_map_is_refused(setting):
+    graph, _, conf, _ = setting
+    wrong = TrajectoryRNN(20, graph.num_edges + 3, cell="lstm", hidden_size=8, embedding_dim=4)
+    with pytest.raises(InputError, match=r"^model: the model predicts .* edge classes"):
+        make("rnn_filter").reset(RoadMap(graph, model=wrong), conf)
