@@ -1,6 +1,7 @@
 """Topo-DLM: the conditional imitation-learning controller of Cai & Wan (Codevilla et al.'s branched network).
 
-* **Image encoder**: each image normalised by its local contrast (:func:`topoloc.place.network.local_normalize`:
+* **Image encoder**: each image averaged over ``downsample`` x ``downsample`` pixels (the lane and the junctions
+  ahead stay visible; the convolutions cost that factor squared less), normalised by its local contrast (:func:`topoloc.place.network.local_normalize`:
   most of a condition's brightness and colour cast drops out), then one stage per ``channels`` entry
   (3x3 convolution with stride 2, batch norm, ReLU, 3x3 convolution, batch norm, ReLU), flattened, a fully
   connected layer of ``hidden`` units with dropout.
@@ -49,13 +50,13 @@ class TopoDLM(L.LightningModule):
     def __init__(self, in_channels: int = 3, height: int = 48, width: int = 160, channels: Sequence[int] = (24, 32, 48, 64),
                  hidden: int = 256, dropout: float = 0.3, max_speed: float = 12.0, speed_gain: float = 0.5, lr: float = 1e-3,
                  weight_decay: float = 1e-4, steer_weight: float = 0.75, speed_weight: float = 0.1, augment: bool = True,
-                 seed: int = 0) -> None:
+                 seed: int = 0, downsample: int = 1) -> None:
         super().__init__()
         self.save_hyperparameters()
         chans = [in_channels, *[int(c) for c in channels]]
         self.encoder = nn.Sequential(*[_stage(a, b) for a, b in itertools.pairwise(chans)])
         with torch.no_grad():
-            flat = self.encoder(torch.zeros(1, in_channels, height, width)).numel()
+            flat = self.encoder(self._shrink(torch.zeros(1, in_channels, height, width))).numel()
         self.image_fc = nn.Sequential(nn.Linear(flat, hidden), nn.ReLU(inplace=True), nn.Dropout(dropout))
         self.speed_fc = nn.Sequential(nn.Linear(1, 64), nn.ReLU(inplace=True), nn.Linear(64, 64), nn.ReLU(inplace=True))
         self.joint = nn.Sequential(nn.Linear(hidden + 64, hidden), nn.ReLU(inplace=True), nn.Dropout(dropout))
@@ -65,8 +66,13 @@ class TopoDLM(L.LightningModule):
         self.speed_head = nn.Sequential(nn.Linear(hidden, 64), nn.ReLU(inplace=True), nn.Linear(64, 1))
         self._generator: torch.Generator | None = None
 
+    def _shrink(self, images: torch.Tensor) -> torch.Tensor:
+        """The camera images averaged over ``downsample`` x ``downsample`` pixels (what the encoder sees)."""
+        k = int(self.hparams.get("downsample", 1))
+        return F.avg_pool2d(images, k) if k > 1 else images
+
     def _heads(self, images: torch.Tensor, speed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """All branches' outputs (N, commands, 2) and the speed prediction (N,) of float images (0..255)."""
+        """All branches' outputs (N, commands, 2) and the speed prediction (N,) of shrunk float images (0..255)."""
         feat = self.image_fc(torch.flatten(self.encoder(local_normalize(images)), 1))
         joint = self.joint(torch.cat([feat, self.speed_fc(speed[:, None] / self.hparams.max_speed)], dim=1))
         return torch.stack([b(joint) for b in self.branches], dim=1), self.speed_head(feat)[:, 0]
@@ -75,7 +81,7 @@ class TopoDLM(L.LightningModule):
         """(steer, target speed m/s) ``(N, 2)`` of ``(N, C + 2, H, W)``: image, speed plane (m/s), command plane (index)."""
         c = int(self.hparams.in_channels)
         images, speed, command = inputs[:, :c].float(), inputs[:, c, 0, 0].float(), inputs[:, c + 1, 0, 0].long()
-        out, _ = self._heads(images, speed)
+        out, _ = self._heads(self._shrink(images), speed)
         out = out[torch.arange(len(out)), command.clamp(0, len(COMMANDS) - 1)]
         return torch.stack([out[:, 0], out[:, 1] * self.hparams.max_speed], dim=1)
 
@@ -84,7 +90,7 @@ class TopoDLM(L.LightningModule):
         """Steer and throttle for one camera image (H, W, C) uint8, the speed (m/s) and a command index."""
         self.eval()
         x = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
-        out, _ = self._heads(x, torch.tensor([float(speed)]))
+        out, _ = self._heads(self._shrink(x), torch.tensor([float(speed)]))
         steer, target = out[0, int(command)].tolist()
         throttle = self.hparams.speed_gain * (target * self.hparams.max_speed - float(speed))
         return float(np.clip(steer, -1.0, 1.0)), float(np.clip(throttle, -1.0, 1.0))
@@ -92,7 +98,7 @@ class TopoDLM(L.LightningModule):
     # -- training ----------------------------------------------------------------------------------------
     def _step(self, batch: Any, stage: str) -> torch.Tensor:
         images, speed, command, target = batch
-        x = images.permute(0, 3, 1, 2).float()
+        x = self._shrink(images.permute(0, 3, 1, 2).float())
         if stage == "train" and self.hparams.augment:
             if self._generator is None:
                 self._generator = torch.Generator(device=x.device).manual_seed(int(self.hparams.seed))

@@ -24,7 +24,7 @@ from tqdm import tqdm
 
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseInjector, NoiseSettings
 from topoloc.drive.lanes import DriveRoute
-from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator
+from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, VehicleState
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
@@ -97,10 +97,39 @@ class Demonstrations:
                    **{k: np.concatenate([getattr(p, k) for p in parts]) for k in cls.FIELDS})
 
 
+@dataclass(frozen=True)
+class SideViews:
+    """``drive.demonstrations.side_views``: extra views per kept step from poses beside the vehicle's."""
+
+    count: int = 0
+    lateral_m: float = 1.5
+    yaw_deg: float = 10.0
+
+
+def side_view(sim: Simulator, expert: Expert, rng: np.random.Generator, side: SideViews, color: bool) -> tuple[Any, ...]:
+    """One view from a pose up to ``side.lateral_m`` beside and ``side.yaw_deg`` off the vehicle's, with the expert's
+    control from there as the label (the recovery a side camera teaches; the drive itself is not changed)."""
+    state, spec = sim.state, sim.spec
+    lateral, dyaw = rng.uniform(-1, 1) * side.lateral_m, np.radians(rng.uniform(-1, 1) * side.yaw_deg)
+    yaw = state.yaw + dyaw
+    centre = sim.centre + lateral * np.array([np.sin(state.yaw), -np.cos(state.yaw)])
+    h = 0.5 * spec.wheelbase_m
+    virtual = VehicleState(centre[0] - h * np.cos(yaw), centre[1] - h * np.sin(yaw), yaw, state.v, state.delta)
+    saved = expert.s_rear, expert.last_target
+    label = expert.control(virtual)
+    row_target = expert.last_target
+    expert.s_rear, expert.last_target = saved
+    s, off, _ = sim.route.project(centre, sim.s)
+    image = sim._render.render(centre, yaw, sim.t)
+    return (as_input(image, color), state.v, sim.route.command_at(s), label.steer, label.throttle, row_target, True,
+            centre, yaw, off, local_path(sim.route, s, centre, yaw))
+
+
 def record(sim: Simulator, expert: Expert, condition: str, seed: int, noise: NoiseSettings, every: int, color: bool,
-           conditions: list[str], route_index: int) -> tuple[Demonstrations, str]:
-    """One noisy expert drive of ``sim``'s route under ``condition``: its kept steps and the episode's outcome."""
+           conditions: list[str], route_index: int, side: SideViews = SideViews()) -> tuple[Demonstrations, str]:
+    """One noisy expert drive of ``sim``'s route under ``condition``: its kept steps (and side views) and the outcome."""
     rng = np.random.default_rng([seed, 31])
+    side_rng = np.random.default_rng([seed, 37])
     injector = NoiseInjector(noise, sim.spec.control_hz, rng)
     obs = sim.reset(condition, seed)
     expert.reset()
@@ -113,9 +142,10 @@ def record(sim: Simulator, expert: Expert, condition: str, seed: int, noise: Noi
             centre = sim.centre
             rows.append((as_input(obs.image, color), obs.speed, sim.route.command_at(sim.s), label.steer, label.throttle,
                          expert.last_target, offset != 0.0, centre, sim.state.yaw, sim.lateral, local_path(sim.route, sim.s, centre, sim.state.yaw)))
+            rows += [side_view(sim, expert, side_rng, side, color) for _ in range(side.count)]
         obs, status = sim.step(Control(float(np.clip(label.steer + offset, -1, 1)), label.throttle))
     if status != SUCCESS:
-        rows = rows[: max(0, len(rows) - DROP_BEFORE_FAILURE // every)]
+        rows = rows[: max(0, len(rows) - (1 + side.count) * (DROP_BEFORE_FAILURE // every))]
     n = len(rows)
     cols = list(zip(*rows)) if rows else [[] for _ in range(11)]
     shape = (0, sim.rig.height, sim.rig.width, 3 if color else 1)
@@ -136,6 +166,13 @@ def keep_away(demo: Demonstrations, avoid_xy: NDArray[np.float64] | None, min_di
     return Demonstrations(demo.images[keep], demo.conditions, **{k: getattr(demo, k)[keep] for k in Demonstrations.FIELDS})
 
 
+def route_conditions(route: int, n: int, per_route: int | None) -> list[int]:
+    """Indices of the conditions route ``route`` is driven under: ``per_route`` of the ``n``, cyclically from ``route``."""
+    if per_route is None or per_route >= n:
+        return list(range(n))
+    return [(route + k) % n for k in range(int(per_route))]
+
+
 def demonstrate(osm: str | None, graph: RoadGraph, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None,
                 make_route: Any, make_simulator: Any) -> tuple[Demonstrations, dict[str, float]]:
     """Record every training route under every training condition (``conf`` holds ``drive``, ``place``, ``render``).
@@ -153,6 +190,7 @@ def demonstrate(osm: str | None, graph: RoadGraph, conf: dict[str, Any], avoid_x
     noise = NoiseSettings.from_conf(drive["noise"])
     settings = ExpertSettings.from_conf(drive["expert"])
     color = bool(conf["place"]["image"]["color"])
+    side = SideViews(int(demo_conf["side_views"]), float(demo_conf["side_lateral_m"]), float(demo_conf["side_yaw_deg"]))
     parts, outcomes = [], []
     for r in tqdm(range(int(demo_conf["routes"])), desc="demonstration routes", unit="route"):
         chosen = None
@@ -171,9 +209,10 @@ def demonstrate(osm: str | None, graph: RoadGraph, conf: dict[str, Any], avoid_x
                              f"{demo_conf['min_steps']} steps {demo_conf['min_distance_m']} m away from the evaluation route")
         sim = make_simulator(chosen)
         expert = Expert(chosen, sim.spec, settings)
-        for c, condition in enumerate(conditions):
+        for c in route_conditions(r, len(conditions), demo_conf.get("conditions_per_route")):
+            condition = conditions[c]
             seed = int(np.random.SeedSequence([int(drive["seed"]), 43, r, c]).generate_state(1)[0])
-            demo, status = record(sim, expert, condition, seed, noise, every, color, conditions, r)
+            demo, status = record(sim, expert, condition, seed, noise, every, color, conditions, r, side)
             outcomes.append(status)
             parts.append(keep_away(demo, avoid_xy, float(demo_conf["min_distance_m"])))
     demos = Demonstrations.concat(parts)

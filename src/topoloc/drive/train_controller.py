@@ -71,6 +71,7 @@ def build_model(drive: dict[str, Any], demos: Demonstrations) -> TopoDLM:
     net, train = drive["network"], drive["train"]
     h, w, c = demos.images.shape[1:]
     return TopoDLM(in_channels=c, height=h, width=w, channels=list(net["channels"]), hidden=int(net["hidden"]),
+                   downsample=int(net["downsample"]),
                    dropout=float(net["dropout"]), max_speed=float(drive["vehicle"]["max_speed_mps"]),
                    speed_gain=float(drive["expert"]["speed_gain"]), lr=float(train["lr"]),
                    weight_decay=float(train["weight_decay"]), steer_weight=float(train["steer_weight"]),
