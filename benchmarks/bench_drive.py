@@ -49,7 +49,7 @@ def speed(conf: dict, root: Path, steps: int, localizer: str) -> dict[str, float
     lane_s = vertex_lane_s(route, topo)
     place = conf["place"]
     image = (int(place["image"]["height"]), int(place["image"]["width"]), 3 if place["image"]["color"] else 1)
-    agent = DLMAgent(load_controller(root / "drive" / "controller.ckpt", image), topo)
+    agent = DLMAgent(load_controller(root / "drive" / "dlm" / "controller.ckpt", image), topo)
     retrieval = load_model(root / "retrieval" / "model.ckpt")
     condition = place["repeat_conditions"][0]
     out = {}

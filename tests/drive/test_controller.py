@@ -11,7 +11,9 @@ from topoloc.drive.controller import load_controller
 from topoloc.drive.demonstrations import Demonstrations, record
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
 from topoloc.drive.lanes import build_route, plan_route
+from topoloc.drive.local_path import map_path, raster
 from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, VehicleSpec
+from topoloc.drive.topo_lp import TopoLP
 from topoloc.drive.train_controller import fit, signature_example
 from topoloc.errors import InputError
 from topoloc.render.rig import StereoRig
@@ -31,7 +33,8 @@ def straight(straight_road):
     return drive, sim
 
 
-def test_a_controller_from_a_few_hundred_frames_stays_in_lane(straight, tmp_path):
+@pytest.fixture(scope="module")
+def straight_demos(straight):
     drive, sim = straight
     expert = Expert(sim.route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
     noise = NoiseSettings.from_conf({**drive["noise"], "share": 0.3})
@@ -40,7 +43,22 @@ def test_a_controller_from_a_few_hundred_frames_stays_in_lane(straight, tmp_path
         demo, status = record(sim, expert, "clear_noon", 10 + r, noise, 2, True, ["clear_noon"], r)
         assert status == SUCCESS
         parts.append(demo)
-    demos = Demonstrations.concat(parts)
+    return Demonstrations.concat(parts)
+
+
+def _closed_loop(sim, act) -> tuple[str, np.ndarray]:
+    """From 0.5 m off the lane centre and 3 degrees off its heading, in a condition never seen."""
+    obs = sim.reset("overcast", 5, lateral_m=0.5, yaw_deg=3.0)
+    status, lateral = RUNNING, []
+    while status == RUNNING:
+        obs, status = sim.step(Control(*act(obs)))
+        lateral.append(sim.lateral)
+    return status, np.asarray(lateral)
+
+
+def test_a_controller_from_a_few_hundred_frames_stays_in_lane(straight, straight_demos, tmp_path):
+    drive, sim = straight
+    demos = straight_demos
     assert 300 <= np.sum(demos.route < 2) <= 700 and demos.perturbed.mean() > 0.1
     model, _history, metrics = fit(drive, demos, str(tmp_path / "controller.ckpt"))
     assert metrics["best/val/steer_mae"] < 0.1
@@ -48,18 +66,28 @@ def test_a_controller_from_a_few_hundred_frames_stays_in_lane(straight, tmp_path
     loaded = load_controller(tmp_path / "controller.ckpt", (48, 64, 3))
     with pytest.raises(InputError, match="trained on 64x48x3 images, not 160x48x3"):
         load_controller(tmp_path / "controller.ckpt", (48, 160, 3))
-    # Closed loop from a start 0.5 m off the lane centre and 3 degrees off its heading, in a condition never seen.
-    obs = sim.reset("overcast", 5, lateral_m=0.5, yaw_deg=3.0)
-    status, lateral = RUNNING, []
-    while status == RUNNING:
-        obs, status = sim.step(Control(*loaded.act(obs.image, obs.speed, 0)))
-        lateral.append(sim.lateral)
+    status, lateral = _closed_loop(sim, lambda obs: loaded.act(obs.image, obs.speed, 0))
     assert status == SUCCESS
     assert np.max(np.abs(lateral[30:])) < 0.8  # back in the lane's middle after 3 s, and kept there
     assert np.mean(np.abs(lateral[30:])) < 0.4
 
 
-def torch_inputs(demos: Demonstrations):
+def torch_inputs(demos: Demonstrations, agent: str = "dlm"):
     import torch
 
-    return torch.from_numpy(signature_example(demos))
+    return torch.from_numpy(signature_example(demos, agent))
+
+
+def test_topo_lp_learns_the_same_road_from_its_local_path(straight, straight_demos, tmp_path):
+    drive, sim = straight
+    model, _history, metrics = fit(drive | {"path_noise": {"shift_m": 2.0, "yaw_deg": 3.0}}, straight_demos,
+                                   str(tmp_path / "lp.ckpt"), agent="lp")
+    assert metrics["best/val/steer_mae"] < 0.1
+    assert model(torch_inputs(straight_demos, "lp")).shape == (2, 2)
+    loaded = load_controller(tmp_path / "lp.ckpt", (48, 64, 3), cls=TopoLP)
+    with pytest.raises(InputError, match="not a controller checkpoint"):
+        load_controller(tmp_path / "lp.ckpt", (48, 64, 3))  # a Topo-LP is not a Topo-DLM
+    path = raster(map_path(sim.route.xy[::4], 0))  # the map of a straight road: straight on everywhere
+    status, lateral = _closed_loop(sim, lambda obs: loaded.act(obs.image, obs.speed, path))
+    assert status == SUCCESS
+    assert np.mean(np.abs(lateral[30:])) < 0.4

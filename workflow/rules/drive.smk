@@ -1,4 +1,4 @@
-# Route following under appearance change (Cai & Wan): closed-loop simulator, expert demonstrations, Topo-DLM,
+# Route following under appearance change (Cai & Wan): closed-loop simulator, expert demonstrations, Topo-DLM, Topo-LP,
 # teach and repeat in closed loop.
 
 
@@ -28,38 +28,43 @@ rule simulate_demonstrations:
 
 
 rule train_controller:
-    """Train Topo-DLM (Lightning); the model is logged to MLflow with its signature."""
+    """Train Topo-DLM or Topo-LP (Lightning); the model is logged to MLflow with its signature."""
     input:
         demonstrations=rules.simulate_demonstrations.output.demonstrations,
     output:
-        model="results/{region}/drive/controller.ckpt",
-        history="results/{region}/drive/controller_history.csv",
-        metrics="results/{region}/drive/controller_metrics.json",
+        model="results/{region}/drive/{controller}/controller.ckpt",
+        history="results/{region}/drive/{controller}/history.csv",
+        metrics="results/{region}/drive/{controller}/metrics.json",
         figure=report(
-            "results/{region}/drive/controller_training.png",
+            "results/{region}/drive/{controller}/training.png",
             caption="../report/drive_training.rst",
             category="Route following",
-            labels={"region": "{region}", "figure": "controller training"},
+            labels={"region": "{region}", "figure": "{controller} training"},
         ),
+    wildcard_constraints:
+        controller="dlm|lp",
     params:
-        conf={"drive": {k: config["drive"][k] for k in ("threads", "vehicle", "expert", "network", "train")}
-              | {"demonstrations": {"val_routes": config["drive"]["demonstrations"]["val_routes"]}}},
+        conf=lambda wildcards: {"controller": wildcards.controller, "drive": {
+            k: config["drive"][k] for k in ("threads", "vehicle", "expert", "network", "train")}
+            | {"demonstrations": {"val_routes": config["drive"]["demonstrations"]["val_routes"]}}
+            | ({"path_noise": config["drive"]["path_noise"]} if wildcards.controller == "lp" else {})},
         code=code("topoloc.drive.train_controller"),
     log:
-        "results/{region}/logs/train_controller.log",
+        "results/{region}/logs/train_controller_{controller}.log",
     benchmark:
-        "results/{region}/benchmarks/train_controller.tsv"
+        "results/{region}/benchmarks/train_controller_{controller}.tsv"
     threads: config["drive"]["threads"]
     script:
         "../scripts/train_controller.py"
 
 
 rule follow_route:
-    """Teach and repeat in closed loop: Topo-DLM and replay, ground-truth and place localization, per condition."""
+    """Teach and repeat in closed loop: Topo-DLM, Topo-LP and replay, ground-truth and place localization, per condition."""
     input:
         osm=rules.download_osm.output.osm,
         graph=rules.build_graph.output.graph,
-        controller=rules.train_controller.output.model,
+        **{f"controller_{a}": f"results/{{region}}/drive/{a}/controller.ckpt"
+           for a in config["drive"]["follow"]["agents"] if a in ("dlm", "lp")},
         model=rules.train_retrieval.output.model,
         map=rules.build_topometric_map.output.map,
     output:

@@ -8,7 +8,8 @@ by a localization on the topometric map.
   true distance with the noise model of ``place.odometry_noise``: a scale error per drive and white noise).
   It is *unsure* when no answer of the last ``lost_steps`` steps had a confidence of at least
   ``place.localize.threshold``; the agents then slow down to ``slow_mps`` (as the paper does while relocalizing).
-* **Agents**: :class:`DLMAgent` (Topo-DLM: the image, the speed and the vertex's command) and
+* **Agents**: :class:`DLMAgent` (Topo-DLM: the image, the speed and the vertex's command), :class:`LPAgent`
+  (Topo-LP: the image, the speed and the local path of the map from the vertex) and
   :class:`ReplayAgent` (the paper's baseline: the steering the expert used at that vertex in the teach drive,
   and its target speed there).
 
@@ -27,6 +28,7 @@ from numpy.typing import NDArray
 from topoloc.drive.demonstrations import as_input
 from topoloc.drive.expert import Expert
 from topoloc.drive.lanes import DriveRoute
+from topoloc.drive.local_path import map_path, raster
 from topoloc.drive.simulator import RUNNING, Control, Simulator
 from topoloc.errors import InputError
 from topoloc.localizer import Localizer
@@ -132,6 +134,21 @@ class DLMAgent:
 
     def act(self, image: NDArray[np.uint8], speed: float, vertex: int) -> Control:
         return Control(*self.model.act(image, speed, int(self.topo.command[vertex])))
+
+
+class LPAgent:
+    """Topo-LP driven by the local path of the localized vertex (:func:`topoloc.drive.local_path.map_path`)."""
+
+    name = "Topo-LP"
+
+    def __init__(self, model: Any, topo: TopometricMap) -> None:
+        self.model, self.topo = model, topo
+        self._paths: dict[int, NDArray[np.uint8]] = {}
+
+    def act(self, image: NDArray[np.uint8], speed: float, vertex: int) -> Control:
+        if vertex not in self._paths:
+            self._paths[vertex] = raster(map_path(self.topo.xy, vertex))
+        return Control(*self.model.act(image, speed, self._paths[vertex]))
 
 
 class ReplayAgent:

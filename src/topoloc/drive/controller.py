@@ -71,9 +71,14 @@ class TopoDLM(L.LightningModule):
         k = int(self.hparams.get("downsample", 1))
         return F.avg_pool2d(images, k) if k > 1 else images
 
+    @staticmethod
+    def _normalize(images: torch.Tensor) -> torch.Tensor:
+        """Local-contrast normalisation of shrunk float images."""
+        return local_normalize(images)
+
     def _heads(self, images: torch.Tensor, speed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """All branches' outputs (N, commands, 2) and the speed prediction (N,) of shrunk float images (0..255)."""
-        feat = self.image_fc(torch.flatten(self.encoder(local_normalize(images)), 1))
+        feat = self.image_fc(torch.flatten(self.encoder(self._normalize(images)), 1))
         joint = self.joint(torch.cat([feat, self.speed_fc(speed[:, None] / self.hparams.max_speed)], dim=1))
         return torch.stack([b(joint) for b in self.branches], dim=1), self.speed_head(feat)[:, 0]
 
@@ -96,15 +101,19 @@ class TopoDLM(L.LightningModule):
         return float(np.clip(steer, -1.0, 1.0)), float(np.clip(throttle, -1.0, 1.0))
 
     # -- training ----------------------------------------------------------------------------------------
+    def _outputs(self, x: torch.Tensor, speed: torch.Tensor, condition: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The commanded branch's output (N, 2) and the speed prediction of a batch (``condition``: the commands)."""
+        out, speed_pred = self._heads(x, speed)
+        return out[torch.arange(len(out)), condition], speed_pred
+
     def _step(self, batch: Any, stage: str) -> torch.Tensor:
-        images, speed, command, target = batch
+        images, speed, condition, target = batch
         x = self._shrink(images.permute(0, 3, 1, 2).float())
         if stage == "train" and self.hparams.augment:
             if self._generator is None:
                 self._generator = torch.Generator(device=x.device).manual_seed(int(self.hparams.seed))
             x = augment(x, self._generator, shift_px=0)
-        out, speed_pred = self._heads(x, speed)
-        chosen = out[torch.arange(len(out)), command]
+        chosen, speed_pred = self._outputs(x, speed, condition)
         w = float(self.hparams.steer_weight)
         err = (chosen - target) ** 2
         control = (w * err[:, 0] + (1.0 - w) * err[:, 1]).mean()
@@ -128,14 +137,14 @@ class TopoDLM(L.LightningModule):
 
 
 def load_controller(path: str | Path, image_shape: tuple[int, int, int] | None = None,
-                    where: str = "place.image") -> TopoDLM:
-    """The controller of a ``train_controller`` checkpoint, on the CPU, in eval mode.
+                    where: str = "place.image", cls: type[TopoDLM] = TopoDLM) -> TopoDLM:
+    """The controller (of class ``cls``: Topo-DLM or Topo-LP) of a ``train_controller`` checkpoint, on the CPU, in eval mode.
 
     InputError naming the file when it is not one, or ``where`` when it was trained on images of another
     shape than ``image_shape`` (H, W, C).
     """
     try:
-        model = TopoDLM.load_from_checkpoint(str(path), map_location="cpu")
+        model = cls.load_from_checkpoint(str(path), map_location="cpu")
     except (OSError, RuntimeError, KeyError, TypeError) as err:
         raise InputError(path, f"not a controller checkpoint ({err})") from err
     hp = model.hparams

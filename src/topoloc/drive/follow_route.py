@@ -2,7 +2,7 @@
 
 The evaluation route is the teach route of the topometric map (``place.route``), cut to
 ``drive.follow.length_m``. For every repeat condition (``place.repeat_conditions``) and each of
-``drive.follow.repeats`` seeds, every agent of ``drive.follow.agents`` (``dlm``: Topo-DLM; ``replay``: the teach
+``drive.follow.repeats`` seeds, every agent of ``drive.follow.agents`` (``dlm``: Topo-DLM; ``lp``: Topo-LP; ``replay``: the teach
 drive's steering per vertex, recorded from the expert's teach drive) drives it with every localization of
 ``drive.follow.localization`` (``ground_truth`` or a place localizer of the registry, with the retrieval
 network's scores; :mod:`topoloc.drive.closed_loop`). The same seed gives every agent the same start offset
@@ -28,16 +28,18 @@ from tqdm import tqdm
 from topoloc.drive.closed_loop import (
     DLMAgent,
     GroundTruth,
+    LPAgent,
     PlaceLocalization,
     ReplayAgent,
     run_episode,
     teach_controls,
     vertex_lane_s,
 )
-from topoloc.drive.controller import load_controller
+from topoloc.drive.controller import TopoDLM, load_controller
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.plot import frame_grid, paths_figure, success_figure
 from topoloc.drive.routes import evaluation_route, make_simulator
+from topoloc.drive.topo_lp import TopoLP
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json, write_text
@@ -50,7 +52,9 @@ from topoloc.render.conditions import check_conditions
 
 log = logging.getLogger(__name__)
 
-AGENT_NAMES = {"dlm": "Topo-DLM", "replay": "replay"}
+AGENT_NAMES = {"dlm": "Topo-DLM", "lp": "Topo-LP", "replay": "replay"}
+#: The agents driven by a trained controller (``train_controller`` per agent), with their class.
+LEARNED = {"dlm": TopoDLM, "lp": TopoLP}
 
 
 def method_name(agent: str, localization: str) -> str:
@@ -90,12 +94,12 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     topo = TopometricMap.load(inputs["map"])
     lane_s = vertex_lane_s(route, topo)
     image = (int(place["image"]["height"]), int(place["image"]["width"]), 3 if place["image"]["color"] else 1)
-    controller = load_controller(inputs["controller"], image) if "dlm" in follow["agents"] else None
+    controllers = {a: load_controller(inputs[f"controller_{a}"], image, cls=LEARNED[a]) for a in follow["agents"] if a in LEARNED}
     retrieval = load_model(inputs["model"]) if place_names else None
     sim = make_simulator(inputs.get("osm"), graph, route, conf)
     expert = Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
     teach_steer, teach_speed = teach_controls(sim, expert, place["teach_condition"], int(drive["seed"]), lane_s)
-    agents = {"dlm": lambda: DLMAgent(controller, topo),
+    agents = {"dlm": lambda: DLMAgent(controllers["dlm"], topo), "lp": lambda: LPAgent(controllers["lp"], topo),
               "replay": lambda: ReplayAgent(teach_steer, teach_speed, float(drive["expert"]["speed_gain"]))}
     locs = {"ground_truth": lambda: GroundTruth(lane_s)}
     for name in place_names:
@@ -103,7 +107,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     rows, traces, strips = [], {}, []
     runs = [(c, r, a, loc) for c in names["repeat"] for r in range(int(follow["repeats"]))
             for a in follow["agents"] for loc in localizations]
-    strip_method = ("dlm" if "dlm" in follow["agents"] else follow["agents"][0],
+    strip_method = (next((a for a in ("lp", "dlm") if a in follow["agents"]), follow["agents"][0]),
                     place_names[0] if place_names else "ground_truth")
     for condition, repeat, agent, loc in tqdm(runs, desc="repeat drives", unit="drive"):
         seed = int(np.random.SeedSequence([int(drive["seed"]), 59, names["repeat"].index(condition), repeat]).generate_state(1)[0])
