@@ -5,7 +5,9 @@ Per training route and training condition (``drive.demonstrations``) the expert
 ``record_every``-th step is kept with its camera image (the place images' camera), speed, command, the
 expert's steering, throttle and target speed (the labels), whether the step was perturbed, the pose and the lateral
 offset, and the **local path** (the lane's next ``LOCAL_PATH_M`` metres in the vehicle frame, every metre:
-what Topo-LP would be given). Steps closer than ``min_distance_m`` to the evaluation route are dropped,
+what Topo-LP is given, in its lane's frame). With ``side_views`` each kept step adds views from poses beside the
+vehicle's, labelled with the expert's control from there (:func:`side_view`). Routes take ``conditions_per_route``
+of the conditions (:func:`route_conditions`). Steps closer than ``min_distance_m`` to the evaluation route are dropped,
 so training and evaluation places are disjoint; a route keeping fewer than ``min_steps`` steps is drawn
 again. The last ``val_routes`` routes are for validation.
 """

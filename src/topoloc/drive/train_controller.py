@@ -1,9 +1,11 @@
-"""Stage ``train_controller``: fit Topo-DLM (:mod:`topoloc.drive.controller`) on the expert's demonstrations.
+"""Stage ``train_controller``: fit Topo-DLM (:mod:`topoloc.drive.controller`) or Topo-LP (:mod:`topoloc.drive.topo_lp`,
+``conf["controller"]``: ``dlm`` or ``lp``) on the expert's demonstrations.
 
 Data: the demonstrations of ``simulate_demonstrations``; the last ``demonstrations.val_routes`` routes are
 for validation (``val/loss``, ``val/steer_mae`` pick the checkpoint), the others for training. Every epoch draws
 ``train.batches_per_epoch`` batches of ``train.batch_size`` steps with the commands balanced (each command
-present in the data is drawn equally often: turns are rare), seeded by ``train.seed``.
+present in the data is drawn equally often: turns are rare), seeded by ``train.seed``. Topo-LP's steps carry the
+local-path image of their lane path with the training noise of ``drive.path_noise`` (:class:`PathSteps`).
 
 Trained by :func:`topoloc.training.fit` (the shared Lightning path): the best checkpoint is written to
 ``model`` and logged to MLflow as a PyTorch model with its signature (``(N, C + 2, H, W)`` -> ``(N, 2)``).
