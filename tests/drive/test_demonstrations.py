@@ -50,3 +50,19 @@ def test_routes_share_out_the_conditions():
     assert route_conditions(4, 5, 2) == [4, 0]
     assert route_conditions(1, 2, 5) == [0, 1]
     assert sorted(c for r in range(5) for c in route_conditions(r, 5, 1)) == [0, 1, 2, 3, 4]
+
+
+def test_steer_balance_draws_sharp_bends_as_often_as_straight_on():
+    from topoloc.drive.demonstrations import LOCAL_PATH_M, Demonstrations
+    from topoloc.drive.train_controller import DemoData
+
+    n = 400
+    steer = np.where(np.arange(n) % 20 == 0, 0.6, 0.02).astype(np.float32)  # one step in 20 in a sharp bend
+    demos = Demonstrations(np.zeros((n, 4, 4, 3), np.uint8), ["clear_noon"], np.repeat([0, 1], n // 2), np.zeros(n, np.int64),
+                           np.full(n, 5.0, np.float32), np.zeros(n, np.int64), steer, np.zeros(n, np.float32),
+                           np.full(n, 5.0, np.float32), np.zeros(n, bool), np.zeros((n, 2)), np.zeros(n), np.zeros(n, np.float32),
+                           np.zeros((n, LOCAL_PATH_M, 2), np.float32))
+    train = {"batch_size": 8, "batches_per_epoch": 1, "seed": 0}
+    share = lambda data: data.weights[steer[data.train_idx] > 0.5].sum() / data.weights.sum()
+    assert np.isclose(share(DemoData(demos, 1, train, 12.0)), 0.05)
+    assert np.isclose(share(DemoData(demos, 1, train | {"steer_balance": True}, 12.0)), 0.5)

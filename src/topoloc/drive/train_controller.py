@@ -37,6 +37,8 @@ log = logging.getLogger(__name__)
 
 #: The controllers this stage trains, by agent name.
 CONTROLLERS: dict[str, type[TopoDLM]] = {"dlm": TopoDLM, "lp": TopoLP}
+#: Bins of |steer| that ``train.steer_balance`` draws equally often.
+STEER_BINS = np.array([0.1, 0.2, 0.35, 0.5])
 
 
 def _targets(demos: Demonstrations, idx: np.ndarray, max_speed: float) -> np.ndarray:
@@ -87,6 +89,9 @@ class DemoData(L.LightningDataModule):
         self.demos, self.train_conf, self.max_speed, self.path_noise = demos, train, max_speed, path_noise
         counts = np.bincount(demos.command[self.train_idx], minlength=len(COMMANDS)).astype(float)
         self.weights = 1.0 / counts[demos.command[self.train_idx]]
+        if train.get("steer_balance"):  # sharp bends are rare under every command: draw them as often as straight on
+            bins = np.digitize(np.abs(demos.steer[self.train_idx]), STEER_BINS)
+            self.weights = self.weights / np.bincount(bins, minlength=len(STEER_BINS) + 1)[bins]
 
     def train_dataloader(self) -> DataLoader:
         batch = int(self.train_conf["batch_size"])
