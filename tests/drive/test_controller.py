@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from tests.drive.conftest import drive_conf, node_at, route_scene
-from topoloc.drive.controller import load_controller
+from topoloc.drive.controller import WAYPOINT_ARCS, load_controller, pure_pursuit, waypoint_targets
 from topoloc.drive.demonstrations import Demonstrations, record
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
 from topoloc.drive.lanes import build_route, plan_route
@@ -73,9 +74,31 @@ def test_a_controller_from_a_few_hundred_frames_stays_in_lane(straight, straight
 
 
 def torch_inputs(demos: Demonstrations, agent: str = "dlm"):
-    import torch
-
     return torch.from_numpy(signature_example(demos, agent))
+
+
+def test_pure_pursuit_on_the_recorded_lane_points_is_the_experts_steering(straight, straight_demos):
+    drive, _ = straight
+    demos = straight_demos
+    targets = waypoint_targets(demos.path)
+    assert targets.shape == (len(demos), 2 * len(WAYPOINT_ARCS))
+    steer = pure_pursuit(torch.from_numpy(targets), torch.from_numpy(demos.speed), 2.7, 35.0,
+                         drive["expert"]["lookahead_s"], drive["expert"]["min_lookahead_m"]).numpy()
+    assert np.abs(demos.steer).max() > 0.2  # the perturbations make it steer
+    assert np.abs(steer - demos.steer).mean() < 0.01
+
+
+def test_a_waypoint_controller_stays_in_lane(straight, straight_demos, tmp_path):
+    drive, sim = straight
+    conf = drive | {"network": {**drive["network"], "output": "waypoints"}}
+    model, _history, metrics = fit(conf, straight_demos, str(tmp_path / "wp.ckpt"))
+    assert model.n_outputs == 2 * len(WAYPOINT_ARCS) + 1
+    assert metrics["best/val/steer_mae"] < 0.1
+    assert model(torch_inputs(straight_demos)).shape == (2, 2)
+    loaded = load_controller(tmp_path / "wp.ckpt", (48, 64, 3))
+    status, lateral = _closed_loop(sim, lambda obs: loaded.act(obs.image, obs.speed, 0))
+    assert status == SUCCESS
+    assert np.mean(np.abs(lateral[30:])) < 0.4
 
 
 def test_topo_lp_learns_the_same_road_from_its_local_path(straight, straight_demos, tmp_path):

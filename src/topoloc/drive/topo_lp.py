@@ -37,10 +37,10 @@ class TopoLP(TopoDLM):
             nn.Flatten(), nn.Linear(16 * (PATH_PX // 4) ** 2, PATH_FEATURES), nn.ReLU(inplace=True))
         self.joint = nn.Sequential(nn.Linear(hidden + 64 + PATH_FEATURES, hidden), nn.ReLU(inplace=True), nn.Dropout(dropout))
         self.branches = nn.ModuleList([nn.Sequential(nn.Linear(hidden, hidden // 2), nn.ReLU(inplace=True),
-                                                     nn.Dropout(dropout), nn.Linear(hidden // 2, 2))])
+                                                     nn.Dropout(dropout), nn.Linear(hidden // 2, self.n_outputs))])
 
     def _lp_heads(self, images: torch.Tensor, speed: torch.Tensor, paths: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(steer, target speed / max speed) ``(N, 2)`` and the speed prediction of shrunk images and path images (N, P, P)."""
+        """The head's outputs ``(N, n_outputs)`` and the speed prediction of shrunk images and path images (N, P, P)."""
         feat = self.image_fc(torch.flatten(self.encoder(self._normalize(images)), 1))
         path = self.path_encoder(paths[:, None].float() / 255.0)
         joint = self.joint(torch.cat([feat, self.speed_fc(speed[:, None] / self.hparams.max_speed), path], dim=1))
@@ -49,17 +49,20 @@ class TopoLP(TopoDLM):
     def forward(self, inputs: torch.Tensor) -> torch.Tensor:
         """(steer, target speed m/s) ``(N, 2)`` of ``(N, C + 2, H, W)``: image, speed plane, path plane (module docstring)."""
         c = int(self.hparams.in_channels)
-        out, _ = self._lp_heads(self._shrink(inputs[:, :c].float()), inputs[:, c, 0, 0].float(),
-                                inputs[:, c + 1, :PATH_PX, :PATH_PX])
-        return torch.stack([out[:, 0], out[:, 1] * self.hparams.max_speed], dim=1)
+        speed = inputs[:, c, 0, 0].float()
+        out, _ = self._lp_heads(self._shrink(inputs[:, :c].float()), speed, inputs[:, c + 1, :PATH_PX, :PATH_PX])
+        steer, target = self._control(out, speed)
+        return torch.stack([steer, target * self.hparams.max_speed], dim=1)
 
     @torch.no_grad()
     def act(self, image: NDArray[np.uint8], speed: float, path: NDArray[np.uint8]) -> tuple[float, float]:  # type: ignore[override]
         """Steer and throttle for one camera image (H, W, C) uint8, the speed (m/s) and a local-path image."""
         self.eval()
         x = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
-        out, _ = self._lp_heads(self._shrink(x), torch.tensor([float(speed)]), torch.from_numpy(path)[None])
-        steer, target = out[0].tolist()
+        v = torch.tensor([float(speed)])
+        out, _ = self._lp_heads(self._shrink(x), v, torch.from_numpy(path)[None])
+        steer_t, target_t = self._control(out, v)
+        steer, target = float(steer_t[0]), float(target_t[0])
         throttle = self.hparams.speed_gain * (target * self.hparams.max_speed - float(speed))
         return float(np.clip(steer, -1.0, 1.0)), float(np.clip(throttle, -1.0, 1.0))
 

@@ -22,7 +22,7 @@ import pandas as pd
 import torch
 from torch.utils.data import DataLoader, Dataset, TensorDataset, WeightedRandomSampler
 
-from topoloc.drive.controller import TopoDLM
+from topoloc.drive.controller import TopoDLM, waypoint_targets
 from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.local_path import lane_frame_path, raster
 from topoloc.drive.plot import training_figure
@@ -42,7 +42,9 @@ STEER_BINS = np.array([0.1, 0.2, 0.35, 0.5])
 
 
 def _targets(demos: Demonstrations, idx: np.ndarray, max_speed: float) -> np.ndarray:
-    return np.column_stack([demos.steer[idx], demos.target_speed[idx] / max_speed]).astype(np.float32)
+    """Labels per step: steer, target speed / max speed, then the scaled waypoints (:func:`waypoint_targets`)."""
+    return np.column_stack([demos.steer[idx], demos.target_speed[idx] / max_speed,
+                            waypoint_targets(demos.path[idx])]).astype(np.float32)
 
 
 def _tensors(demos: Demonstrations, idx: np.ndarray, max_speed: float) -> TensorDataset:
@@ -120,7 +122,10 @@ def build_model(drive: dict[str, Any], demos: Demonstrations, agent: str = "dlm"
                    dropout=float(net["dropout"]), max_speed=float(drive["vehicle"]["max_speed_mps"]),
                    speed_gain=float(drive["expert"]["speed_gain"]), lr=float(train["lr"]),
                    weight_decay=float(train["weight_decay"]), steer_weight=float(train["steer_weight"]),
-                   speed_weight=float(train["speed_weight"]), augment=bool(train["augment"]), seed=int(train["seed"]))
+                   speed_weight=float(train["speed_weight"]), augment=bool(train["augment"]), seed=int(train["seed"]),
+                   output=str(net["output"]), wheelbase=float(drive["vehicle"]["wheelbase_m"]),
+                   max_steer_deg=float(drive["vehicle"]["max_steer_deg"]), lookahead_s=float(drive["expert"]["lookahead_s"]),
+                   min_lookahead_m=float(drive["expert"]["min_lookahead_m"]))
 
 
 def signature_example(demos: Demonstrations, agent: str = "dlm") -> np.ndarray:
