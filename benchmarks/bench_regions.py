@@ -70,6 +70,7 @@ def tables(results: Path) -> dict[str, str]:
 def snakemake(checkout: Path, target: str, config: str, extra: list[str], env: dict[str, str]) -> float:
     """Run the workflow; its wall time in seconds. Exits with the tail of its log when it fails."""
     env = {k: v for k, v in env.items() if k not in {"MLFLOW_TRACKING_URI", "TOPOLOC_INVOCATION_ID"}}
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(checkout / "src"), env.get("PYTHONPATH")]))  # the clone's code
     log = checkout / "bench_regions.log"
     began = time.perf_counter()
     with log.open("w") as out:
