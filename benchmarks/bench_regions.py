@@ -130,6 +130,7 @@ def main(argv: list[str] | None = None) -> int:
             finally:
                 for hog in hogs:
                     hog.kill()
+                    hog.join()
         else:
             raise SystemExit(f"bench_regions: run {label!r} is not coresN, loadedN or slurm")
         jobs = len(list((checkout / "results").glob("*/benchmarks/*.tsv")))
