@@ -5,9 +5,10 @@ per 2 m step: slower than a car drives. A filter therefore starts on a *coarse* 
 (:class:`~topoloc.localization.metric.MetricModel` with cells ``coarse_factor`` times longer, on the same
 chains, so that every fine cell lies in one coarse cell): a coarse step is taken every ``coarse_factor``
 fine steps (net, so reversing counts back), with the yaw at that moment; ``coarse_factor`` 4 costs about
-16 times less per metre. The coarse model is more tolerant (heading spread and turn spread doubled, the
-distance jitter scaled to the same variance per metre, no scale classes), so that the truth is not
-pruned for being up to half a coarse cell off. Once the coarse belief of a filter holds at most
+16 times less per metre. The coarse model may be more tolerant (heading spread and turn spread times
+``coarse_spread``, the distance jitter scaled to the same variance per metre, no scale classes); with one
+observation per coarse cell it already tells roads apart less sharply per metre than the full grid, so the
+default spread is 1 and the coarse phase is kept short. Once the coarse belief of a filter holds at most
 ``coarse_handoff_cells`` positions (counted in fine cells), it is handed to the fine filter at a coarse
 step: each coarse entry's mass is spread over the fine cells it covers (by their length), with its heading
 offset belief; from there the filter is the dense one (:class:`~topoloc.localization.metric_filter.MetricFilter`).
@@ -28,6 +29,7 @@ from numpy.typing import NDArray
 
 from topoloc.localization.metric import MetricModel, MetricSettings, concentration, resultant_length
 from topoloc.localization.metric_filter import COMPLEX, REAL, TINY, Estimate, MetricFilter
+
 
 def coarse_settings(settings: MetricSettings) -> MetricSettings:
     """The settings of the coarse model that goes with ``settings`` (see the module docstring)."""
