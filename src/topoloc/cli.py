@@ -40,6 +40,7 @@ from topoloc.localizer import ROAD_OBSERVATIONS
 from topoloc.motion.georef import fit_rigid, from_origin, grid_heading_deg, to_map
 from topoloc.motion.poses import planar_yaw, read_gps, read_poses
 from topoloc.registry import check_names, make, registry
+from topoloc.trajectory.model import load_model
 
 log = logging.getLogger("topoloc")
 
@@ -90,11 +91,7 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     needs_model = [n for n in names if known[n].requires_model]
     if needs_model and args.model is None:
         raise InputError("--model", f"{', '.join(needs_model)} needs a trained model (a checkpoint, runs:/ID/model or a run id)")
-    model = None
-    if needs_model:  # torch and Lightning are imported only for the learned localizers
-        from topoloc.trajectory.model import load_model
-
-        model = load_model(args.model, args.tracking_uri)
+    model = load_model(args.model, args.tracking_uri) if needs_model else None
     road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], conf["localization"]["decode"]["max_skip_m"], model)
     to_lonlat = pyproj.Transformer.from_crs(graph.crs, "EPSG:4326", always_xy=True)
     tables, seconds = [], {}
