@@ -143,3 +143,28 @@ def test_handed_over_belief_is_the_coarse_one_at_that_step(grid):
             assert np.abs(image / image.sum() - coarse_weight / coarse_weight.sum()).sum() < 1e-3
             checked += 1
     assert checked == 3
+
+
+def test_coarse_answers_kept_between_coarse_steps_are_the_current_ones(grid):
+    """The coarse answers are computed once per coarse step and reused: through resets of some filters, handoffs
+    and later steps they equal answers computed afresh at every step."""
+    graph, road, conf = grid
+    settings = MetricSettings.from_conf(coarse_conf(conf)["localization"]["metric"])
+    fine = MetricModel(graph, road.states, settings)
+    coarse = MetricModel(graph, road.states, coarse_settings(settings))
+    kept, fresh = CityFilter(fine, coarse, filters=3), CityFilter(fine, coarse, filters=3)
+    sim = simulate(graph, 800.0, NOISE_LEVELS["medium"], np.random.default_rng(6))
+    steps = make("metric").observe(Odometry(sim.odo_xy, sim.odo_yaw), road, conf).items
+    phases = []
+    for j, (direction, yaw) in enumerate(steps):
+        if j in (0, 3, 9):
+            kept.reset([0, 3, 9].index(j))
+            fresh.reset([0, 3, 9].index(j))
+        kept.update(direction, yaw)
+        fresh.update(direction, yaw)
+        fresh._coarse_answers = None  # what an uncached filter would answer
+        for a, b in zip(kept.answers(), fresh.answers()):
+            assert (a.edge, a.cell, a.confidence) == (b.edge, b.cell, b.confidence)
+        phases.append(kept.in_coarse.copy())
+    phases = np.array(phases)
+    assert phases[:, 0].any() and not phases[-1].all()  # the comparison covered both phases

@@ -52,6 +52,7 @@ class CityFilter:
         self.fine = MetricFilter(fine, self.filters)
         self.coarse = MetricFilter(coarse, self.filters) if coarse is not None else None
         self.in_coarse = np.zeros(self.filters, bool)
+        self._coarse_answers: list[Estimate] | None = None  # the coarse belief changes once per coarse step only
         if coarse is None:
             return
         self.factor = int(fine.settings.coarse_factor)
@@ -87,6 +88,7 @@ class CityFilter:
             self.fine.history[int(b)] = []
         self.coarse.reset(which)
         self.in_coarse[which] = True
+        self._coarse_answers = None
 
     def _to_fine(self, b: int) -> None:
         """Hand filter ``b``'s coarse belief to the fine filter (mass spread over the fine cells it covers)."""
@@ -99,6 +101,7 @@ class CityFilter:
         fine = self.order[idx]
         self.fine.seed(b, fine, weight[owner] * self.share[fine], kappa[owner], mean[owner], offmap, last_yaw)
         self.in_coarse[b] = False
+        self._coarse_answers = None
 
     def _to_coarse(self, b: int) -> None:
         """Send a lost fine filter ``b`` back to the coarse phase (its belief summed into coarse cells)."""
@@ -117,6 +120,7 @@ class CityFilter:
                          np.where(length > 0, resultant[cells] / np.maximum(length, TINY), 1.0).astype(COMPLEX),
                          offmap, last_yaw)
         self.in_coarse[b] = True
+        self._coarse_answers = None
 
     # -- one step --------------------------------------------------------------------------------------------
 
@@ -141,6 +145,7 @@ class CityFilter:
             self.coarse_level += coarse_step
             if self.coarse.running.any():
                 self.coarse.update(coarse_step, yaw)
+                self._coarse_answers = None
             counts = np.bincount(self.coarse.group // self.coarse.classes, minlength=self.filters)
             for b in np.flatnonzero(self.in_coarse & self.coarse.running & (counts <= self.handoff)):
                 self._to_fine(int(b))
@@ -152,7 +157,9 @@ class CityFilter:
         out = self.fine.answers()
         if self.coarse is None or not self.in_coarse.any():
             return out
-        coarse = self.coarse.answers()
+        if self._coarse_answers is None:
+            self._coarse_answers = self.coarse.answers()
+        coarse = self._coarse_answers
         for b in np.flatnonzero(self.in_coarse):
             est = coarse[b]
             out[b] = Estimate(est.edge, int(self.fine_of[est.cell]) if est.cell >= 0 else -1, est.xy, est.confidence, est.offmap)
