@@ -43,29 +43,20 @@ from topoloc.trajectory.model import load_model
 REPO = Path(__file__).resolve().parents[1]
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--results", default="results/kitti00", help="results folder of the kitti00 pipeline")
-    parser.add_argument("--model", default=None, help="model checkpoint (default: RESULTS/model/model.ckpt, if present)")
-    parser.add_argument("--localizers", default="metric,hmm,rnn_filter,raw,strategy1,strategy2")
-    parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE", help="override config keys")
-    parser.add_argument("--configfile", default=str(REPO / "config" / "config.yaml"))
-    parser.add_argument("--steps", type=int, default=5000, help="steps of the decoding-speed runs")
-    args = parser.parse_args(argv)
-    conf = load(args.configfile, dotted_overrides(args.set))
+def evaluate_kitti(results: Path, conf: dict, names: list[str], model_path: Path | None = None,
+                   drives: tuple[str, ...] = ("gt", "orbslam2")) -> tuple[pd.DataFrame, pd.DataFrame, dict, RoadMap]:
+    """Every localizer of ``names`` from a start every ``localization.evaluate.start_every_m`` of each KITTI drive,
+    beside the oracle: the per-start table, its summary (with ``cpu_s``), the CPU seconds and the road map."""
     lconf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
     ev = conf["localization"]["evaluate"]
-    results = Path(args.results)
     graph = RoadGraph.load(results / "graph" / "graph.graphml")
-    model_path = Path(args.model or results / "model" / "model.ckpt")
     known = registry()
-    names = [n for n in args.localizers.split(",") if not known[n].requires_model or model_path.is_file()]
     model = load_model(str(model_path)) if any(known[n].requires_model for n in names) else None
     road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], conf["localization"]["decode"]["max_skip_m"], model)
     oracle = Oracle(graph, road.states, ev["oracle"]["angle_tol_deg"], ev["oracle"]["length_tol"])
     judge = Judge(graph, ev["node_tolerance_m"])
     rows, seconds = [], {}
-    for drive in ("gt", "orbslam2"):
+    for drive in drives:
         frames = pd.read_csv(results / "odometry" / drive / "frames.csv")
         truth = DriveTruth.from_frames(frames)
         odometry = Odometry.from_poses(read_poses(results / "odometry" / drive / "poses.txt"))
@@ -94,6 +85,27 @@ def main(argv: list[str] | None = None) -> int:
     table = pd.DataFrame(rows)
     summary = summarize(table)
     summary["cpu_s"] = [seconds.get((r.drive, r.localizer), np.nan) for r in summary.itertuples()]
+    return table, summary, seconds, road
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--results", default="results/kitti00", help="results folder of the kitti00 pipeline")
+    parser.add_argument("--model", default=None, help="model checkpoint (default: RESULTS/model/model.ckpt, if present)")
+    parser.add_argument("--localizers", default="metric,hmm,rnn_filter,raw,strategy1,strategy2")
+    parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE", help="override config keys")
+    parser.add_argument("--configfile", default=str(REPO / "config" / "config.yaml"))
+    parser.add_argument("--steps", type=int, default=5000, help="steps of the decoding-speed runs")
+    args = parser.parse_args(argv)
+    conf = load(args.configfile, dotted_overrides(args.set))
+    results = Path(args.results)
+    model_path = Path(args.model or results / "model" / "model.ckpt")
+    known = registry()
+    names = [n for n in args.localizers.split(",") if not known[n].requires_model or model_path.is_file()]
+    table, summary, seconds, road = evaluate_kitti(results, conf, names, model_path)
+    model, graph = road.model, road.graph
+    ev = conf["localization"]["evaluate"]
+    lconf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
     cols = ["drive", "localizer", "starts", "localized_share", "median_m", "p90_m", "median_ratio", "accuracy_after",
             "position_error_m", "confident_wrong", "cpu_s"]
     print(f"## KITTI 00, a start every {ev['start_every_m']:.0f} m ({graph.num_edges} roads)\n")

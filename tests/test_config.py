@@ -39,7 +39,7 @@ def test_bad_config_fails_with_one_line(tmp_path, yaml, expected):
     config.write_text(yaml)
     env = {**os.environ, "PYTHONPATH": str(REPO / "src")}
     result = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--cores", "1", "--configfile", str(config)],
-                            cwd=REPO, capture_output=True, text=True, env=env)
+                            check=False, cwd=REPO, capture_output=True, text=True, env=env)
     assert result.returncode != 0
     lines = [line for line in result.stderr.splitlines() if line.startswith("topoloc:")]
     assert len(lines) == 1 and lines[0].startswith(expected), result.stderr[-2000:]
@@ -119,3 +119,16 @@ def test_each_source_accepts_what_it_needs(source):
               "kitti_stereo": {"run1": {"sequence": "seq/00"}}}.get(source, {})  # simulated, rendered: no drives
     config = load(None, {"odometry": {"source": source, "drives": drives, "origin": origin}})
     assert config["odometry"]["source"] == source
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in (REPO / "config").glob("*.yaml")))
+def test_every_shipped_config_is_valid_on_top_of_the_defaults(name):
+    """What `snakemake --configfile config/<name>` parses: the file merged onto config/config.yaml, regions too."""
+    import yaml
+
+    from topoloc.config import load, region_configs
+
+    conf = load(REPO / "config" / "config.yaml", yaml.safe_load((REPO / "config" / name).read_text()) or {})
+    regions = region_configs(conf, REPO)
+    assert conf["region"]["name"] not in regions
+    assert all(r["region"]["name"] == n for n, r in regions.items())

@@ -124,22 +124,13 @@ def test_fast_dev_run_writes_the_last_state(tmp_path):
     assert (tmp_path / "model.ckpt").is_file() and result.metrics["steps"] == 1
 
 
-class Shuffled(L.LightningModule):
+class Shuffled(Line):
     """A small MLP on shuffled batches with dropout: every source of randomness a real training has."""
 
     def __init__(self) -> None:
         super().__init__()
-        self.net = torch.nn.Sequential(torch.nn.Linear(3, 16), torch.nn.ReLU(), torch.nn.Dropout(0.2),
-                                       torch.nn.Linear(16, 1))
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(x)
-
-    def training_step(self, batch, batch_idx):
-        x, y = batch
-        loss = torch.nn.functional.mse_loss(self(x), y)
-        self.log("train/loss", loss)
-        return loss
+        self.layer = torch.nn.Sequential(torch.nn.Linear(3, 16), torch.nn.ReLU(), torch.nn.Dropout(0.2),
+                                         torch.nn.Linear(16, 1))
 
     def validation_step(self, batch, batch_idx):
         x, y = batch

@@ -110,3 +110,61 @@ def test_coarse_phase_hands_over_and_back(grid):
     phases, sure = np.array(phases), np.array(sure)
     assert not phases[len(steps) - 1] and phases[-1]  # fine at the end of the drive on the map, coarse again off it
     assert not sure[-50:].any()
+
+
+def test_handed_over_belief_is_the_coarse_one_at_that_step(grid):
+    """A coarse belief handed over stands for the position after the step that handed it over: the fine filter
+    must not take that step a second time (which would move the mass one fine cell ahead of the coarse one)."""
+    graph, road, conf = grid
+    settings = MetricSettings.from_conf(coarse_conf(conf)["localization"]["metric"])
+    fine = MetricModel(graph, road.states, settings)
+    bank = CityFilter(fine, MetricModel(graph, road.states, coarse_settings(settings)), filters=3)
+    handed: dict[int, tuple] = {}
+    to_fine = bank._to_fine
+
+    def record(b: int) -> None:
+        mine = bank.coarse.group // bank.coarse.classes == b
+        handed[b] = np.bincount(bank.coarse.cell[mine], weights=bank.coarse.weight[mine], minlength=bank.coarse.num_cells)
+        to_fine(b)
+
+    bank._to_fine = record
+    sim = simulate(graph, 1000.0, NOISE_LEVELS["low"], np.random.default_rng(5))
+    steps = make("metric").observe(Odometry(sim.odo_xy, sim.odo_yaw), road, conf).items
+    checked = 0
+    for j, (direction, yaw) in enumerate(steps):
+        if j in (0, 5, 11):  # starts at several phases of the coarse steps
+            bank.reset([0, 5, 11].index(j))
+        handed.clear()
+        bank.update(direction, yaw)
+        for b, coarse_weight in handed.items():
+            mine = bank.fine.group // bank.fine.classes == b
+            image = np.bincount(bank.coarse_of[bank.fine.cell[mine]], weights=bank.fine.weight[mine],
+                                minlength=bank.coarse.num_cells)
+            assert np.abs(image / image.sum() - coarse_weight / coarse_weight.sum()).sum() < 1e-3
+            checked += 1
+    assert checked == 3
+
+
+def test_coarse_answers_kept_between_coarse_steps_are_the_current_ones(grid):
+    """The coarse answers are computed once per coarse step and reused: through resets of some filters, handoffs
+    and later steps they equal answers computed afresh at every step."""
+    graph, road, conf = grid
+    settings = MetricSettings.from_conf(coarse_conf(conf)["localization"]["metric"])
+    fine = MetricModel(graph, road.states, settings)
+    coarse = MetricModel(graph, road.states, coarse_settings(settings))
+    kept, fresh = CityFilter(fine, coarse, filters=3), CityFilter(fine, coarse, filters=3)
+    sim = simulate(graph, 800.0, NOISE_LEVELS["medium"], np.random.default_rng(6))
+    steps = make("metric").observe(Odometry(sim.odo_xy, sim.odo_yaw), road, conf).items
+    phases = []
+    for j, (direction, yaw) in enumerate(steps):
+        if j in (0, 3, 9):
+            kept.reset([0, 3, 9].index(j))
+            fresh.reset([0, 3, 9].index(j))
+        kept.update(direction, yaw)
+        fresh.update(direction, yaw)
+        fresh._coarse_answers = None  # what an uncached filter would answer
+        for a, b in zip(kept.answers(), fresh.answers()):
+            assert (a.edge, a.cell, a.confidence) == (b.edge, b.cell, b.confidence)
+        phases.append(kept.in_coarse.copy())
+    phases = np.array(phases)
+    assert phases[:, 0].any() and not phases[-1].all()  # the comparison covered both phases

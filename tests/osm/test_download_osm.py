@@ -1,3 +1,4 @@
+import io
 import json
 import time
 
@@ -164,7 +165,11 @@ def test_a_cached_area_is_used_offline(tmp_path, no_network, monkeypatch):
 
 
 def test_the_connection_probe_does_not_hang_on_a_name_lookup(monkeypatch):
-    monkeypatch.setattr(download_osm.socket, "create_connection", lambda *args, **kwargs: time.sleep(5))
+    def slow_lookup(*args, **kwargs) -> io.BytesIO:
+        time.sleep(5)
+        return io.BytesIO()  # closable, so that the abandoned probe thread ends cleanly inside a later test
+
+    monkeypatch.setattr(download_osm.socket, "create_connection", slow_lookup)
     started = time.monotonic()
     assert download_osm.unreachable(["https://overpass.example/api"], 0.2).endswith("(no answer within 0.2 s)")
     assert time.monotonic() - started < 1.0

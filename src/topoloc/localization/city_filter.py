@@ -5,9 +5,10 @@ per 2 m step: slower than a car drives. A filter therefore starts on a *coarse* 
 (:class:`~topoloc.localization.metric.MetricModel` with cells ``coarse_factor`` times longer, on the same
 chains, so that every fine cell lies in one coarse cell): a coarse step is taken every ``coarse_factor``
 fine steps (net, so reversing counts back), with the yaw at that moment; ``coarse_factor`` 4 costs about
-16 times less per metre. The coarse model is more tolerant (heading spread and turn spread doubled, the
-distance jitter scaled to the same variance per metre, no scale classes), so that the truth is not
-pruned for being up to half a coarse cell off. Once the coarse belief of a filter holds at most
+16 times less per metre. The coarse model may be more tolerant (heading spread and turn spread times
+``coarse_spread``, the distance jitter scaled to the same variance per metre, no scale classes); with one
+observation per coarse cell it already tells roads apart less sharply per metre than the full grid, so the
+default spread is 1 and the coarse phase is kept short. Once the coarse belief of a filter holds at most
 ``coarse_handoff_cells`` positions (counted in fine cells), it is handed to the fine filter at a coarse
 step: each coarse entry's mass is spread over the fine cells it covers (by their length), with its heading
 offset belief; from there the filter is the dense one (:class:`~topoloc.localization.metric_filter.MetricFilter`).
@@ -29,16 +30,13 @@ from numpy.typing import NDArray
 from topoloc.localization.metric import MetricModel, MetricSettings, concentration, resultant_length
 from topoloc.localization.metric_filter import COMPLEX, REAL, TINY, Estimate, MetricFilter
 
-#: The coarse model's heading spread and turn spread, as multiples of the fine model's.
-COARSE_SPREAD = 2.0
-
 
 def coarse_settings(settings: MetricSettings) -> MetricSettings:
     """The settings of the coarse model that goes with ``settings`` (see the module docstring)."""
     k = settings.coarse_factor
     return dataclasses.replace(settings, cell_m=settings.cell_m * k, step_jitter=settings.step_jitter / k,
-                               heading_sigma_deg=COARSE_SPREAD * settings.heading_sigma_deg,
-                               turn_sigma_share=COARSE_SPREAD * settings.turn_sigma_share, scale_classes=1, coarse_factor=1)
+                               heading_sigma_deg=settings.coarse_spread * settings.heading_sigma_deg,
+                               turn_sigma_share=settings.coarse_spread * settings.turn_sigma_share, scale_classes=1, coarse_factor=1)
 
 
 def uses_coarse(settings: MetricSettings, fine_cells: int) -> bool:
@@ -54,6 +52,7 @@ class CityFilter:
         self.fine = MetricFilter(fine, self.filters)
         self.coarse = MetricFilter(coarse, self.filters) if coarse is not None else None
         self.in_coarse = np.zeros(self.filters, bool)
+        self._coarse_answers: list[Estimate] | None = None  # the coarse belief changes once per coarse step only
         if coarse is None:
             return
         self.factor = int(fine.settings.coarse_factor)
@@ -89,6 +88,7 @@ class CityFilter:
             self.fine.history[int(b)] = []
         self.coarse.reset(which)
         self.in_coarse[which] = True
+        self._coarse_answers = None
 
     def _to_fine(self, b: int) -> None:
         """Hand filter ``b``'s coarse belief to the fine filter (mass spread over the fine cells it covers)."""
@@ -101,6 +101,7 @@ class CityFilter:
         fine = self.order[idx]
         self.fine.seed(b, fine, weight[owner] * self.share[fine], kappa[owner], mean[owner], offmap, last_yaw)
         self.in_coarse[b] = False
+        self._coarse_answers = None
 
     def _to_coarse(self, b: int) -> None:
         """Send a lost fine filter ``b`` back to the coarse phase (its belief summed into coarse cells)."""
@@ -119,6 +120,7 @@ class CityFilter:
                          np.where(length > 0, resultant[cells] / np.maximum(length, TINY), 1.0).astype(COMPLEX),
                          offmap, last_yaw)
         self.in_coarse[b] = True
+        self._coarse_answers = None
 
     # -- one step --------------------------------------------------------------------------------------------
 
@@ -135,17 +137,18 @@ class CityFilter:
             coarse_step = 1
         elif self.level <= (self.coarse_level - 1) * self.factor:
             coarse_step = -1
-        if coarse_step:
+        if self.fine.running.any():
+            self.fine.update(direction, yaw)
+        for b in np.flatnonzero(self.in_coarse):
+            self.fine.history[int(b)].append((int(direction), float(yaw), None))
+        if coarse_step:  # after the fine step: a belief handed over now stands for the position after this step
             self.coarse_level += coarse_step
             if self.coarse.running.any():
                 self.coarse.update(coarse_step, yaw)
+                self._coarse_answers = None
             counts = np.bincount(self.coarse.group // self.coarse.classes, minlength=self.filters)
             for b in np.flatnonzero(self.in_coarse & self.coarse.running & (counts <= self.handoff)):
                 self._to_fine(int(b))
-        for b in np.flatnonzero(self.in_coarse):
-            self.fine.history[int(b)].append((int(direction), float(yaw), None))
-        if self.fine.running.any():
-            self.fine.update(direction, yaw)
 
     # -- answers ---------------------------------------------------------------------------------------------
 
@@ -154,7 +157,9 @@ class CityFilter:
         out = self.fine.answers()
         if self.coarse is None or not self.in_coarse.any():
             return out
-        coarse = self.coarse.answers()
+        if self._coarse_answers is None:
+            self._coarse_answers = self.coarse.answers()
+        coarse = self._coarse_answers
         for b in np.flatnonzero(self.in_coarse):
             est = coarse[b]
             out[b] = Estimate(est.edge, int(self.fine_of[est.cell]) if est.cell >= 0 else -1, est.xy, est.confidence, est.offmap)

@@ -79,7 +79,8 @@ class MetricSettings:
     scale_classes: int
     coarse_factor: int = 1
     coarse_min_cells: int = 0
-    coarse_handoff_cells: int = 20000
+    coarse_handoff_cells: int = 100000
+    coarse_spread: float = 1.0
 
     @classmethod
     def from_conf(cls, conf: dict) -> MetricSettings:
