@@ -27,7 +27,7 @@ def test_every_rule_has_measured_resources_in_both_profiles():
         assert set(resources) == rules, f"profiles/{name}: rerun benchmarks/measure_resources.py --write"
         assert all(res["mem_mb"] >= 512 and res["runtime"] >= 10 for res in resources.values())
         gpus = {rule for rule, res in resources.items() if res.get("gpu")}
-        assert gpus == ({"train_rnn", "train_retrieval"} if name == "slurm-gpu" else set())
+        assert gpus == ({"train_rnn", "train_retrieval", "train_controller"} if name == "slurm-gpu" else set())
         # train_rnn's own threads follow --cores: a scheduler needs a number
         assert profile["set-threads"]["train_rnn"] >= 1
 

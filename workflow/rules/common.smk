@@ -103,6 +103,7 @@ def all_outputs():
         *expand(rules.localize_repeat.output, region=REGION),
         *expand(rules.build_topometric_map.output, region=REGION),
         *expand(rules.render_places.output, region=REGION, split=["train", "teach", "repeat"]),
+        *expand(rules.follow_route.output, region=REGION),
     ]
 
 
@@ -210,3 +211,13 @@ def place_conf(split):
     unused = ("routes", "conditions", "sheet", "width", "height", "baseline_m")
     render = {k: v for k, v in config["render"].items() if k not in unused}
     return {"split": split, "render": render, "place": sliced}
+
+
+def drive_conf(*drive_keys):
+    """The config slice of a drive stage: the named drive keys, the place keys of the camera and the teach route,
+    and the render keys of the route and the scene."""
+    unused = ("routes", "conditions", "sheet", "width", "height", "baseline_m")
+    return {"drive": {k: config["drive"][k] for k in drive_keys},
+            "place": {k: config["place"][k] for k in ("route", "image", "command", "teach_condition", "repeat_conditions",
+                                                      "odometry_noise", "localize")},
+            "render": {k: v for k, v in config["render"].items() if k not in unused}}

@@ -1,0 +1,113 @@
+"""Route-following benchmark: closed-loop simulator speed on one core, and the success rates against the targets.
+
+Usage (after ``snakemake all`` built ``results/<region>/drive/follow``)::
+
+    PYTHONPATH=src python benchmarks/bench_drive.py [--config config/config.yaml] [--steps 300]
+
+1. **Speed**: on the evaluation route, one torch thread, the closed loop of Topo-DLM with the configured
+   place localizer (render the camera image, embed it and localize on the topometric map, run the controller,
+   step the vehicle), then its parts alone: rendering, rendering plus the controller, rendering plus the
+   localization. Target: at least 20 closed-loop steps per second at the controller's image size.
+2. **Success rates**: the ``follow_route`` summary per agent and condition, checked against the issue's
+   targets (Topo-DLM with retrieval localization: mean success >= 0.8 and every condition >= 0.6, ahead of
+   replay).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+
+from topoloc.config import load
+from topoloc.drive.closed_loop import DLMAgent, GroundTruth, PlaceLocalization, vertex_lane_s
+from topoloc.drive.controller import load_controller
+from topoloc.drive.demonstrations import as_input
+from topoloc.drive.routes import evaluation_route, make_simulator
+from topoloc.drive.simulator import RUNNING, Control
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.place.network import load_model
+from topoloc.place.topometric_map import TopometricMap
+from topoloc.registry import make
+
+TARGET_STEPS_PER_S = 20.0
+
+
+def speed(conf: dict, root: Path, steps: int, localizer: str) -> dict[str, float]:
+    """Steps per second of the closed loop and of its parts (one thread)."""
+    torch.set_num_threads(1)
+    graph = RoadGraph.load(root / "graph" / "graph.graphml")
+    route = evaluation_route(graph, conf)
+    osm = next((root / "osm").glob("region.*"), None)
+    sim = make_simulator(str(osm) if osm else None, graph, route, conf)
+    topo = TopometricMap.load(root / "topometric_map" / "map.npz")
+    lane_s = vertex_lane_s(route, topo)
+    place = conf["place"]
+    image = (int(place["image"]["height"]), int(place["image"]["width"]), 3 if place["image"]["color"] else 1)
+    agent = DLMAgent(load_controller(root / "drive" / "dlm" / "controller.ckpt", image), topo)
+    retrieval = load_model(root / "retrieval" / "model.ckpt")
+    condition = place["repeat_conditions"][0]
+    out = {}
+    for name, use_agent, loc in (("render only", False, None), ("render + controller", True, GroundTruth(lane_s)),
+                                 ("render + localization", False, "place"), ("closed loop", True, "place")):
+        localization = PlaceLocalization(make(localizer), topo, retrieval, place["localize"]) if loc == "place" else loc
+        obs = sim.reset(condition, 1)
+        if localization is not None:
+            localization.start(np.random.default_rng(0))
+        done, status = 0, RUNNING
+        started = time.perf_counter()
+        while done < steps:
+            vertex = 0
+            if localization is not None:
+                vertex, _ = localization.update(as_input(obs.image, place["image"]["color"]), obs.speed * sim.spec.dt, sim)
+            control = agent.act(as_input(obs.image, place["image"]["color"]), obs.speed, vertex) if use_agent \
+                else Control(0.0, 0.3)
+            obs, status = sim.step(control)
+            done += 1
+            if status != RUNNING:
+                obs = sim.reset(condition, 1)
+                if localization is not None:
+                    localization.start(np.random.default_rng(0))
+        out[name] = done / (time.perf_counter() - started)
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--config", default="config/config.yaml")
+    parser.add_argument("--steps", type=int, default=300)
+    parser.add_argument("--localizer", default="place_loop")
+    args = parser.parse_args()
+    config = load(Path(args.config))
+    conf = {"drive": config["drive"], "place": config["place"], "render": config["render"]}
+    root = Path("results") / config["region"]["name"]
+    rates = speed(conf, root, args.steps, args.localizer)
+    size = f"{config['place']['image']['width']}x{config['place']['image']['height']}"
+    print(f"## Closed-loop steps per second (one thread, {size} images, {args.steps} steps each)")
+    for name, value in rates.items():
+        print(f"- {name}: {value:.1f} steps/s")
+    verdict = "met" if rates["closed loop"] >= TARGET_STEPS_PER_S else "MISSED"
+    print(f"target >= {TARGET_STEPS_PER_S:.0f} closed-loop steps/s: {verdict}")
+    summary_path = root / "drive" / "follow" / "summary.csv"
+    result = {"steps_per_s": rates}
+    if summary_path.is_file():
+        summary = pd.read_csv(summary_path)
+        table = summary.pivot_table(index="agent", columns="condition", values="success_rate", sort=False)
+        table.insert(0, "Mean", table.mean(axis=1))
+        print("\n## Success rate per condition (follow_route)\n")
+        print(table.to_markdown(floatfmt=".2f"))
+        dlm = [a for a in table.index if a.startswith("Topo-DLM") and "ground truth" not in a]
+        for agent in dlm:
+            ok = table.loc[agent, "Mean"] >= 0.8 and table.loc[agent].drop("Mean").min() >= 0.6
+            print(f"{agent}: target mean >= 0.8 and every condition >= 0.6: {'met' if ok else 'MISSED'}")
+        result["success"] = {a: table.loc[a].to_dict() for a in table.index}
+    print(json.dumps(result, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,231 @@
+"""The expert's demonstrations: images, speed, command, local path and controls on the training routes.
+
+Per training route and training condition (``drive.demonstrations``) the expert
+(:mod:`topoloc.drive.expert`) drives the route in the simulator with noise injection; every
+``record_every``-th step is kept with its camera image (the place images' camera), speed, command, the
+expert's steering, throttle and target speed (the labels), whether the step was perturbed, the pose and the lateral
+offset, and the **local path** (the lane's next ``LOCAL_PATH_M`` metres in the vehicle frame, every metre:
+what Topo-LP is given, in its lane's frame). With ``side_views`` each kept step adds views from poses beside the
+vehicle's, labelled with the expert's control from there (:func:`side_view`). Routes take ``conditions_per_route``
+of the conditions (:func:`route_conditions`). Steps closer than ``min_distance_m`` to the evaluation route are dropped,
+so training and evaluation places are disjoint; a route keeping fewer than ``min_steps`` steps is drawn
+again. The last ``val_routes`` routes are for validation.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from tqdm import tqdm
+
+from topoloc.drive.expert import Expert, ExpertSettings, NoiseInjector, NoiseSettings
+from topoloc.drive.lanes import DriveRoute
+from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, VehicleState
+from topoloc.errors import InputError
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.io import atomic_path
+from topoloc.place.images import polyline_distance
+from topoloc.render.conditions import get_condition
+
+log = logging.getLogger(__name__)
+
+LOCAL_PATH_M = 20
+#: Steps before a failure that are not kept (the expert was already losing the road).
+DROP_BEFORE_FAILURE = 20
+
+
+def as_input(image: NDArray[np.uint8], color: bool) -> NDArray[np.uint8]:
+    """The camera image as the networks take it: BGR (H, W, 3), or grey (H, W, 1)."""
+    return image if color else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)[..., None]
+
+
+def local_path(route: DriveRoute, s: float, xy: NDArray[np.float64], yaw: float) -> NDArray[np.float32]:
+    """The lane's next :data:`LOCAL_PATH_M` metres from arc length ``s``, every metre, in the vehicle frame (x ahead, y left)."""
+    pts = np.stack([route.point(s + d) for d in range(1, LOCAL_PATH_M + 1)]) - xy
+    c, sn = np.cos(yaw), np.sin(yaw)
+    return np.column_stack([pts[:, 0] * c + pts[:, 1] * sn, -pts[:, 0] * sn + pts[:, 1] * c]).astype(np.float32)
+
+
+@dataclass
+class Demonstrations:
+    """Recorded steps: ``images`` (n, H, W, C) uint8 and per step its route, condition index, speed, command,
+    labels ``steer`` / ``throttle`` / ``target_speed``, ``perturbed``, pose ``xy`` / ``yaw``, ``lateral`` offset and ``path`` (n, 20, 2)."""
+
+    images: NDArray[np.uint8]
+    conditions: list[str]
+    route: NDArray[np.int64]
+    condition: NDArray[np.int64]
+    speed: NDArray[np.float32]
+    command: NDArray[np.int64]
+    steer: NDArray[np.float32]
+    throttle: NDArray[np.float32]
+    target_speed: NDArray[np.float32]
+    perturbed: NDArray[np.bool_]
+    xy: NDArray[np.float64]
+    yaw: NDArray[np.float64]
+    lateral: NDArray[np.float32]
+    path: NDArray[np.float32]
+
+    FIELDS = ("route", "condition", "speed", "command", "steer", "throttle", "target_speed", "perturbed", "xy", "yaw", "lateral", "path")
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+    def save(self, path: str | Path) -> None:
+        """Write as ``.npz``, atomically."""
+        with atomic_path(path) as tmp, open(tmp, "wb") as handle:
+            np.savez(handle, images=self.images, conditions=np.array(self.conditions),
+                     **{k: getattr(self, k) for k in self.FIELDS})
+
+    @classmethod
+    def load(cls, path: str | Path) -> Demonstrations:
+        """Read a file written by :meth:`save`; InputError naming the file otherwise."""
+        try:
+            with np.load(path) as data:
+                return cls(data["images"], [str(c) for c in data["conditions"]], **{k: data[k] for k in cls.FIELDS})
+        except (OSError, KeyError, ValueError) as err:
+            raise InputError(path, f"not a demonstrations file ({err})") from err
+
+    @classmethod
+    def concat(cls, parts: list[Demonstrations]) -> Demonstrations:
+        """Steps of several recordings with the same conditions, one after the other."""
+        return cls(np.concatenate([p.images for p in parts]), list(parts[0].conditions),
+                   **{k: np.concatenate([getattr(p, k) for p in parts]) for k in cls.FIELDS})
+
+
+@dataclass(frozen=True)
+class SideViews:
+    """``drive.demonstrations.side_views``: extra views per kept step from poses beside the vehicle's."""
+
+    count: int = 0
+    lateral_m: float = 1.5
+    yaw_deg: float = 10.0
+
+
+def side_view(sim: Simulator, expert: Expert, rng: np.random.Generator, side: SideViews, color: bool) -> tuple[Any, ...]:
+    """One view from a pose up to ``side.lateral_m`` beside and ``side.yaw_deg`` off the vehicle's, with the expert's
+    control from there as the label (the recovery a side camera teaches; the drive itself is not changed)."""
+    state, spec = sim.state, sim.spec
+    lateral, dyaw = rng.uniform(-1, 1) * side.lateral_m, np.radians(rng.uniform(-1, 1) * side.yaw_deg)
+    yaw = state.yaw + dyaw
+    centre = sim.centre + lateral * np.array([np.sin(state.yaw), -np.cos(state.yaw)])
+    h = 0.5 * spec.wheelbase_m
+    virtual = VehicleState(centre[0] - h * np.cos(yaw), centre[1] - h * np.sin(yaw), yaw, state.v, state.delta)
+    saved = expert.s_rear, expert.last_target
+    label = expert.control(virtual)
+    row_target = expert.last_target
+    expert.s_rear, expert.last_target = saved
+    s, off, _ = sim.route.project(centre, sim.s)
+    image = sim._render.render(centre, yaw, sim.t)
+    return (as_input(image, color), state.v, sim.route.command_at(s), label.steer, label.throttle, row_target, True,
+            centre, yaw, off, local_path(sim.route, s, centre, yaw))
+
+
+def record(sim: Simulator, expert: Expert, condition: str, seed: int, noise: NoiseSettings, every: int, color: bool,
+           conditions: list[str], route_index: int, side: SideViews = SideViews()) -> tuple[Demonstrations, str]:
+    """One noisy expert drive of ``sim``'s route under ``condition``: its kept steps (and side views) and the outcome."""
+    rng = np.random.default_rng([seed, 31])
+    side_rng = np.random.default_rng([seed, 37])
+    injector = NoiseInjector(noise, sim.spec.control_hz, rng)
+    obs = sim.reset(condition, seed)
+    expert.reset()
+    rows: list[tuple[Any, ...]] = []
+    status = RUNNING
+    while status == RUNNING:
+        label = expert.control(sim.state)
+        offset = injector.offset()
+        if sim.t % every == 0:
+            centre = sim.centre
+            rows.append((as_input(obs.image, color), obs.speed, sim.route.command_at(sim.s), label.steer, label.throttle,
+                         expert.last_target, offset != 0.0, centre, sim.state.yaw, sim.lateral, local_path(sim.route, sim.s, centre, sim.state.yaw)))
+            rows += [side_view(sim, expert, side_rng, side, color) for _ in range(side.count)]
+        obs, status = sim.step(Control(float(np.clip(label.steer + offset, -1, 1)), label.throttle))
+    if status != SUCCESS:
+        rows = rows[: max(0, len(rows) - (1 + side.count) * (DROP_BEFORE_FAILURE // every))]
+    n = len(rows)
+    cols = list(zip(*rows)) if rows else [[] for _ in range(11)]
+    shape = (0, sim.rig.height, sim.rig.width, 3 if color else 1)
+    demo = Demonstrations(np.stack(cols[0]) if n else np.zeros(shape, np.uint8), list(conditions),
+                          np.full(n, route_index, np.int64), np.full(n, conditions.index(condition), np.int64),
+                          np.asarray(cols[1], np.float32), np.asarray(cols[2], np.int64), np.asarray(cols[3], np.float32),
+                          np.asarray(cols[4], np.float32), np.asarray(cols[5], np.float32), np.asarray(cols[6], bool),
+                          np.asarray(cols[7], float).reshape(n, 2), np.asarray(cols[8], float), np.asarray(cols[9], np.float32),
+                          np.asarray(cols[10], np.float32).reshape(n, LOCAL_PATH_M, 2))
+    return demo, status
+
+
+def keep_away(demo: Demonstrations, avoid_xy: NDArray[np.float64] | None, min_distance_m: float) -> Demonstrations:
+    """The steps at least ``min_distance_m`` from the polyline ``avoid_xy``."""
+    if avoid_xy is None or not len(demo):
+        return demo
+    keep = polyline_distance(demo.xy, avoid_xy) >= min_distance_m
+    return Demonstrations(demo.images[keep], demo.conditions, **{k: getattr(demo, k)[keep] for k in Demonstrations.FIELDS})
+
+
+def route_conditions(route: int, n: int, per_route: int | None) -> list[int]:
+    """Indices of the conditions route ``route`` is driven under: ``per_route`` of the ``n``, cyclically from ``route``."""
+    if per_route is None or per_route >= n:
+        return list(range(n))
+    return [(route + k) % n for k in range(int(per_route))]
+
+
+def demonstrate(osm: str | None, graph: RoadGraph, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None,
+                make_route: Any, make_simulator: Any) -> tuple[Demonstrations, dict[str, float]]:
+    """Record every training route under every training condition (``conf`` holds ``drive``, ``place``, ``render``).
+
+    ``make_route(rng)`` draws a route (or None), ``make_simulator(route)`` builds its simulator.
+    """
+    drive = conf["drive"]
+    demo_conf = drive["demonstrations"]
+    conditions = [str(c) for c in demo_conf["conditions"]]
+    for i, name in enumerate(conditions):
+        get_condition(name, f"drive.demonstrations.conditions.{i}")
+    if int(demo_conf["val_routes"]) >= int(demo_conf["routes"]):
+        raise InputError("drive.demonstrations.val_routes", "must be fewer than drive.demonstrations.routes")
+    every = int(demo_conf.get("record_every", 1))
+    noise = NoiseSettings.from_conf(drive["noise"])
+    settings = ExpertSettings.from_conf(drive["expert"])
+    color = bool(conf["place"]["image"]["color"])
+    side = SideViews(int(demo_conf["side_views"]), float(demo_conf["side_lateral_m"]), float(demo_conf["side_yaw_deg"]))
+    parts, outcomes = [], []
+    for r in tqdm(range(int(demo_conf["routes"])), desc="demonstration routes", unit="route"):
+        chosen = None
+        for attempt in range(20):
+            route = make_route(np.random.default_rng([int(drive["seed"]), 41, r, attempt]))
+            if route is None:
+                continue
+            near = polyline_distance(route.xy[::8], avoid_xy) < float(demo_conf["min_distance_m"]) if avoid_xy is not None \
+                else np.zeros(len(route.xy[::8]), bool)
+            kept = (1.0 - near.mean()) * route.length_m / (settings.cruise_mps / drive["episode"]["control_hz"]) / every
+            if kept >= int(demo_conf["min_steps"]):
+                chosen = route
+                break
+        if chosen is None:
+            raise InputError("drive.demonstrations.min_distance_m", f"training route {r}: no route keeps "
+                             f"{demo_conf['min_steps']} steps {demo_conf['min_distance_m']} m away from the evaluation route")
+        sim = make_simulator(chosen)
+        expert = Expert(chosen, sim.spec, settings)
+        for c in route_conditions(r, len(conditions), demo_conf.get("conditions_per_route")):
+            condition = conditions[c]
+            seed = int(np.random.SeedSequence([int(drive["seed"]), 43, r, c]).generate_state(1)[0])
+            demo, status = record(sim, expert, condition, seed, noise, every, color, conditions, r, side)
+            outcomes.append(status)
+            parts.append(keep_away(demo, avoid_xy, float(demo_conf["min_distance_m"])))
+    demos = Demonstrations.concat(parts)
+    if not len(demos):
+        raise InputError("drive.demonstrations", "no demonstration step was kept")
+    facts = {"steps": float(len(demos)), "routes": float(demo_conf["routes"]), "expert_episodes": float(len(outcomes)),
+             "expert_success_rate": float(np.mean([o == SUCCESS for o in outcomes])),
+             "perturbed_share": float(demos.perturbed.mean()), "mean_speed_mps": float(demos.speed.mean()),
+             "mean_abs_lateral_m": float(np.abs(demos.lateral).mean())}
+    facts |= {f"steps_{name}": float(np.sum(demos.command == i)) for i, name in
+              enumerate(("follow", "left", "right", "straight"))}
+    if avoid_xy is not None:
+        facts["min_distance_to_evaluation_m"] = float(polyline_distance(demos.xy, avoid_xy).min())
+    return demos, facts

@@ -1,0 +1,161 @@
+"""Stage ``follow_route``: teach and repeat in closed loop, per condition, agent and localization (Cai & Wan, Tables 1-2).
+
+The evaluation route is the teach route of the topometric map (``place.route``), cut to
+``drive.follow.length_m``. For every repeat condition (``place.repeat_conditions``) and each of
+``drive.follow.repeats`` seeds, every agent of ``drive.follow.agents`` (``dlm``: Topo-DLM; ``lp``: Topo-LP; ``replay``: the teach
+drive's steering per vertex, recorded from the expert's teach drive) drives it with every localization of
+``drive.follow.localization`` (``ground_truth`` or a place localizer of the registry, with the retrieval
+network's scores; :mod:`topoloc.drive.closed_loop`). The same seed gives every agent the same start offset
+and odometry noise.
+
+Outputs: ``episodes`` (one row per drive: outcome, progress, localization error, speed of the loop),
+``summary`` (success rate per condition and agent), ``table`` (like the paper's Tables 1 and 2: success rate
+per condition and the mean, held-out conditions of the controller's training marked), ``metrics``, ``paths``
+(the driven paths over the map), ``success`` (bars) and ``strip`` (frames of one repeat per condition).
+"""
+
+from __future__ import annotations
+
+import logging
+from functools import partial
+from typing import Any, cast
+
+import numpy as np
+import pandas as pd
+import torch
+from tqdm import tqdm
+
+from topoloc.drive.closed_loop import (
+    DLMAgent,
+    GroundTruth,
+    LPAgent,
+    PlaceLocalization,
+    ReplayAgent,
+    run_episode,
+    teach_controls,
+    vertex_lane_s,
+)
+from topoloc.drive.controller import TopoDLM, load_controller
+from topoloc.drive.expert import Expert, ExpertSettings
+from topoloc.drive.plot import frame_grid, paths_figure, success_figure
+from topoloc.drive.routes import evaluation_route, make_simulator
+from topoloc.drive.topo_lp import TopoLP
+from topoloc.errors import InputError
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.io import atomic_path, write_json, write_text
+from topoloc.localizer import PLACE_OBSERVATIONS
+from topoloc.place.localize import PlaceLocalizer
+from topoloc.place.network import load_model
+from topoloc.place.topometric_map import TopometricMap
+from topoloc.registry import check_names, make
+from topoloc.render.conditions import check_conditions
+
+log = logging.getLogger(__name__)
+
+AGENT_NAMES = {"dlm": "Topo-DLM", "lp": "Topo-LP", "replay": "replay"}
+#: The agents driven by a trained controller (``train_controller`` per agent), with their class.
+LEARNED = {"dlm": TopoDLM, "lp": TopoLP}
+
+
+def method_name(agent: str, localization: str) -> str:
+    """Table row of an agent with a localization."""
+    return f"{AGENT_NAMES[agent]} ({'ground truth' if localization == 'ground_truth' else localization})"
+
+
+def paper_table(summary: pd.DataFrame, column: str, held_out: list[str], fmt: str) -> str:
+    """Markdown: one row per agent, the mean, one column per condition."""
+    conditions = list(dict.fromkeys(summary.condition))
+    header = ["agent (localization)", "Mean", *[f"{c} (held out)" if c in held_out else c for c in conditions]]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for agent in dict.fromkeys(summary.agent):
+        rows = summary[summary.agent == agent].set_index("condition").loc[conditions, column]
+        lines.append("| " + " | ".join([agent, fmt.format(rows.mean()), *[fmt.format(v) for v in rows]]) + " |")
+    return "\n".join(lines)
+
+
+def place_localization(name: str, topo: TopometricMap, model: Any, localize: dict[str, Any]) -> PlaceLocalization:
+    """A new localization by the registered place localizer ``name``."""
+    return PlaceLocalization(cast(PlaceLocalizer, make(name, PLACE_OBSERVATIONS)), topo, model, localize)
+
+
+def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
+    """Drive every repeat; write the episode table, summary, tables, metrics and figures."""
+    drive, place = conf["drive"], conf["place"]
+    follow = drive["follow"]
+    torch.set_num_threads(int(drive["threads"]))
+    names = check_conditions({"teach_condition": place["teach_condition"], "repeat_conditions": place["repeat_conditions"]})
+    trained = [str(c) for c in drive["demonstrations"]["conditions"]]
+    held_out = [c for c in names["repeat"] if c not in trained]
+    localizations = [str(n) for n in follow["localization"]]
+    place_names = [n for n in localizations if n != "ground_truth"]
+    check_names(place_names, "drive.follow.localization", PLACE_OBSERVATIONS)
+    graph = RoadGraph.load(inputs["graph"])
+    route = evaluation_route(graph, conf)
+    topo = TopometricMap.load(inputs["map"])
+    lane_s = vertex_lane_s(route, topo)
+    image = (int(place["image"]["height"]), int(place["image"]["width"]), 3 if place["image"]["color"] else 1)
+    controllers = {a: load_controller(inputs[f"controller_{a}"], image, cls=LEARNED[a]) for a in follow["agents"] if a in LEARNED}
+    retrieval = load_model(inputs["model"]) if place_names else None
+    sim = make_simulator(inputs.get("osm"), graph, route, conf)
+    expert = Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
+    teach_steer, teach_speed = teach_controls(sim, expert, place["teach_condition"], int(drive["seed"]), lane_s)
+    agents = {"dlm": lambda: DLMAgent(controllers["dlm"], topo), "lp": lambda: LPAgent(controllers["lp"], topo),
+              "replay": lambda: ReplayAgent(teach_steer, teach_speed, float(drive["expert"]["speed_gain"]))}
+    locs = {"ground_truth": lambda: GroundTruth(lane_s)}
+    for name in place_names:
+        locs[name] = partial(place_localization, name, topo, retrieval, place["localize"])
+    rows, traces, strips = [], {}, []
+    runs = [(c, r, a, loc) for c in names["repeat"] for r in range(int(follow["repeats"]))
+            for a in follow["agents"] for loc in localizations]
+    strip_method = (next((a for a in ("lp", "dlm") if a in follow["agents"]), follow["agents"][0]),
+                    place_names[0] if place_names else "ground_truth")
+    for condition, repeat, agent, loc in tqdm(runs, desc="repeat drives", unit="drive"):
+        seed = int(np.random.SeedSequence([int(drive["seed"]), 59, names["repeat"].index(condition), repeat]).generate_state(1)[0])
+        want_strip = repeat == 0 and (agent, loc) == strip_method
+        episode = run_episode(sim, agents[agent](), locs[loc](), topo, condition, seed, conf,
+                              int(follow["strip_frames"]) if want_strip else 0)
+        key = f"{condition}/{repeat}/{agent}/{loc}"
+        traces[key] = episode.xy
+        if want_strip:
+            strips.append((f"{condition}: {episode.outcome}", episode.frames))
+        rows.append({"episode": key, "condition": condition, "repeat": repeat, "agent": method_name(agent, loc),
+                     "outcome": episode.outcome, "success": episode.outcome == "success", "steps": episode.steps,
+                     "progress_m": episode.progress_m, "progress_share": episode.progress_m / route.length_m,
+                     "mean_loc_error_m": float(np.mean(episode.loc_error_m)) if len(episode.loc_error_m) else 0.0,
+                     "slow_steps": episode.slow_steps, "mean_abs_lateral_m": episode.mean_abs_lateral_m,
+                     "steps_per_s": episode.steps / max(episode.seconds, 1e-9)})
+        log.info("%s: %s after %.0f m", key, episode.outcome, episode.progress_m)
+    episodes = pd.DataFrame(rows)
+    summary = (episodes.groupby(["agent", "condition"], sort=False)
+               .agg(success_rate=("success", "mean"), drives=("success", "size"), progress_share=("progress_share", "mean"),
+                    mean_loc_error_m=("mean_loc_error_m", "mean"), steps_per_s=("steps_per_s", "mean")).reset_index())
+    summary.insert(2, "held_out", summary.condition.isin(held_out))
+    with atomic_path(outputs["episodes"]) as tmp:
+        episodes.to_csv(tmp, index=False, float_format="%.3f")
+    with atomic_path(outputs["summary"]) as tmp:
+        summary.to_csv(tmp, index=False, float_format="%.4f")
+    steps_per_s = float(episodes.steps.sum() / (episodes.steps / episodes.steps_per_s).sum())
+    facts = {"route_length_m": route.length_m, "drives": float(len(episodes)), "steps_per_s": steps_per_s,
+             "turns": float(len({int(c) for c in topo.command[lane_s < route.length_m]} - {0}))}
+    parts = [(f"# Route following in closed loop (teach: {place['teach_condition']}; controller trained under "
+             f"{', '.join(trained)}; held out: {', '.join(held_out) or 'none'})"), "",
+             (f"{int(follow['repeats'])} repeat drive(s) per condition and agent over the first {route.length_m:.0f} m "
+             f"of the teach route; {steps_per_s:.1f} closed-loop steps/s on this machine (render, controller, localization)."), ""]
+    for title, column, fmt in (("Success rate", "success_rate", "{:.2f}"),
+                               ("Share of the route driven", "progress_share", "{:.2f}"),
+                               ("Mean localization error (m)", "mean_loc_error_m", "{:.1f}")):
+        parts += [f"## {title}", "", paper_table(summary, column, held_out, fmt), ""]
+    write_text(outputs["table"], "\n".join(parts))
+    paths_figure(graph, route.xy, episodes, traces, outputs["paths"])
+    success_figure(summary, outputs["success"], held_out)
+    if not strips:
+        raise InputError("drive.follow", "no repeat drive was recorded for the frame strip")
+    frame_grid(strips, outputs["strip"], f"{method_name(*strip_method)}: one repeat drive per condition")
+    metrics = dict(facts)
+    for agent, g in summary.groupby("agent", sort=False):
+        short = agent.lower().replace("topo-", "").replace(" (", "_").replace(")", "").replace(" ", "_")
+        metrics[f"{short}_success_mean"] = float(g.success_rate.mean())
+        metrics[f"{short}_success_min"] = float(g.success_rate.min())
+        metrics |= {f"{short}_success_{row.condition}": float(row.success_rate) for row in g.itertuples()}
+    write_json(outputs["metrics"], metrics)
+    return metrics

@@ -1,0 +1,236 @@
+"""Drivable routes on the road graph: the lane to follow, the carriageways, the command ahead.
+
+A :class:`DriveRoute` is a chain of road edges, each entered from a node, checked against one-way
+restrictions. Its **lane** is the road's centre line shifted to the right (right-hand traffic) by a
+quarter of the carriageway on two-way roads (the middle of the right half) and not at all on one-way
+roads, then smoothed with a Gaussian of ``smoothing_m`` (corners become curves), sampled every
+:data:`DENSE_M`. The carriageway width is the per-class default of the renderer
+(:func:`topoloc.render.textures.road_width`: what the images show; the graph keeps no ``lanes`` /
+``width`` tags). Each lane sample carries its road edge and the **navigation command** of Cai & Wan
+(``follow``, or ``left`` / ``right`` / ``straight`` within ``command_m`` before an intersection), from
+:func:`topoloc.place.topometric_map.route_intersections`, the rule that labels the topometric map's vertices.
+
+Two rasters (0.25 m cells) judge where the vehicle is: the **drivable area** (every road of the graph near
+the route, as wide as its carriageway plus ``margin_m``) and the **corridor** (the route's own roads only).
+A point off the drivable area is *off road*; on it but off the corridor, on a *wrong road*.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import cv2
+import networkx as nx
+import numpy as np
+from numpy.typing import NDArray
+from scipy.ndimage import gaussian_filter1d
+
+from topoloc.errors import InputError
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.motion.route import sample_route
+from topoloc.place.topometric_map import COMMANDS, route_intersections, vertex_commands
+from topoloc.render.textures import road_width
+
+DENSE_M = 0.25
+CELL_M = 0.25
+RASTER_MARGIN_M = 40.0
+
+
+def check_route(graph: RoadGraph, edges: list[int], froms: list[int], where: str = "route") -> None:
+    """InputError naming ``where`` unless the edges chain up end to end and none is driven against its one-way."""
+    if not edges or len(edges) != len(froms):
+        raise InputError(where, "a route needs at least one edge and one entry node per edge")
+    for i, (e, f) in enumerate(zip(edges, froms)):
+        if not 0 <= int(e) < graph.num_edges:
+            raise InputError(where, f"edge {e} is not in the road graph ({graph.num_edges} edges)")
+        u, v = int(graph.edges.u.iat[e]), int(graph.edges.v.iat[e])
+        if f not in (u, v):
+            raise InputError(where, f"edge {e} does not start at node {f}")
+        ow = int(graph.edges.oneway.iat[e])
+        if ow == 1 and f != u or ow == -1 and f != v:
+            raise InputError(where, f"edge {e} ({graph.edges['name'].iat[e] or graph.edges.highway.iat[e]}) is one-way "
+                             f"against the route: it cannot be driven from node {f}")
+        if i and graph.other_end(edges[i - 1], froms[i - 1]) != f:
+            raise InputError(where, f"edge {e} does not continue edge {edges[i - 1]}: the route is not connected")
+
+
+def plan_route(graph: RoadGraph, start: int, goal: int) -> tuple[list[int], list[int]]:
+    """The shortest drivable chain of edges from node ``start`` to node ``goal`` (one-way roads respected).
+
+    InputError when either node is not in the graph or the goal cannot be reached (a disconnected goal, or
+    one reachable only against one-way roads).
+    """
+    for name, node in (("start", start), ("goal", goal)):
+        if node not in graph.nodes.index:
+            raise InputError(f"route.{name}", f"node {node} is not in the road graph")
+    directed = nx.DiGraph()
+    for e in range(graph.num_edges):
+        u, v, ow, length = (int(graph.edges.u.iat[e]), int(graph.edges.v.iat[e]), int(graph.edges.oneway.iat[e]),
+                            float(graph.edges.length_m.iat[e]))
+        for a, b, ok in ((u, v, ow >= 0), (v, u, ow <= 0)):
+            if ok and (not directed.has_edge(a, b) or directed[a][b]["length"] > length):
+                directed.add_edge(a, b, length=length, edge=e)
+    try:
+        nodes = nx.shortest_path(directed, start, goal, weight="length")
+    except (nx.NetworkXNoPath, nx.NodeNotFound) as err:
+        raise InputError("route", f"no drivable route from node {start} to node {goal} (one-way roads or a "
+                         "disconnected goal)") from err
+    if len(nodes) < 2:
+        raise InputError("route", "start and goal are the same node")
+    return [int(directed[a][b]["edge"]) for a, b in itertools.pairwise(nodes)], [int(a) for a in nodes[:-1]]
+
+
+def route_froms(graph: RoadGraph, edges: list[int], start_xy: NDArray[np.float64]) -> list[int]:
+    """The entry node of each edge of a connected chain (the first: the end nearer to ``start_xy``)."""
+    froms: list[int] = []
+    for i, e in enumerate(edges):
+        u, v = int(graph.edges.u.iat[e]), int(graph.edges.v.iat[e])
+        if i == 0:
+            nxt = {int(graph.edges.u.iat[edges[1]]), int(graph.edges.v.iat[edges[1]])} if len(edges) > 1 else set()
+            shared = {u, v} & nxt
+            froms.append(_nearer(graph, (u, v), start_xy) if len(shared) != 1 or u == v else (v if u in shared else u))
+        else:
+            froms.append(graph.other_end(edges[i - 1], froms[-1]))
+    return froms
+
+
+def _nearer(graph: RoadGraph, nodes: tuple[int, int], xy: NDArray[np.float64]) -> int:
+    pos = graph.nodes.loc[list(nodes), ["x", "y"]].to_numpy(float)
+    return int(nodes[int(np.argmin(np.hypot(*(pos - np.asarray(xy, float)).T)))])
+
+
+@dataclass
+class DriveRoute:
+    """The lane of a route (see the module docstring): samples ``xy``, heading ``yaw``, arc length ``s``, road
+    ``edge``, carriageway ``width`` and ``command`` (index into :data:`COMMANDS`) every :data:`DENSE_M`."""
+
+    edges: list[int]
+    froms: list[int]
+    xy: NDArray[np.float64]
+    yaw: NDArray[np.float64]
+    s: NDArray[np.float64]
+    edge: NDArray[np.int64]
+    width: NDArray[np.float64]
+    command: NDArray[np.int64]
+    drivable: NDArray[np.uint8] = field(repr=False)
+    corridor: NDArray[np.uint8] = field(repr=False)
+    origin: tuple[float, float] = (0.0, 0.0)  #: map position of the rasters' top-left corner
+
+    @property
+    def length_m(self) -> float:
+        """Length of the lane in metres."""
+        return float(self.s[-1])
+
+    def index(self, s: float) -> int:
+        """The lane sample at arc length ``s`` (clamped)."""
+        return int(np.clip(np.searchsorted(self.s, s), 0, len(self.s) - 1))
+
+    def command_at(self, s: float) -> int:
+        """Command index at arc length ``s``."""
+        return int(self.command[self.index(s)])
+
+    def point(self, s: float) -> NDArray[np.float64]:
+        """Lane position at arc length ``s`` (clamped to the ends)."""
+        return np.array([np.interp(s, self.s, self.xy[:, 0]), np.interp(s, self.s, self.xy[:, 1])])
+
+    def project(self, xy: NDArray[np.float64], near_s: float | None = None, back_m: float = 10.0,
+                ahead_m: float = 30.0) -> tuple[float, float, float]:
+        """Arc length, signed lateral offset (+ right of the lane) and lane heading of the point nearest to ``xy``,
+        searched within ``[near_s - back_m, near_s + ahead_m]`` (everywhere when ``near_s`` is None)."""
+        lo, hi = 0, len(self.s)
+        if near_s is not None:
+            lo = int(np.searchsorted(self.s, near_s - back_m))
+            hi = max(lo + 1, int(np.searchsorted(self.s, near_s + ahead_m)))
+        d = np.hypot(*(self.xy[lo:hi] - np.asarray(xy, float)).T)
+        k = lo + int(np.argmin(d))
+        yaw = float(self.yaw[k])
+        dx, dy = np.asarray(xy, float) - self.xy[k]
+        along = dx * np.cos(yaw) + dy * np.sin(yaw)
+        lateral = dx * np.sin(yaw) - dy * np.cos(yaw)
+        return float(np.clip(self.s[k] + along, 0.0, self.s[-1])), float(lateral), yaw
+
+    def _cell(self, xy: NDArray[np.float64]) -> tuple[int, int]:
+        return int((self.origin[1] - xy[1]) / CELL_M), int((xy[0] - self.origin[0]) / CELL_M)
+
+    def on_drivable(self, xy: NDArray[np.float64]) -> bool:
+        """Whether ``xy`` is on a carriageway (with the margin)."""
+        r, c = self._cell(xy)
+        h, w = self.drivable.shape
+        return bool(0 <= r < h and 0 <= c < w and self.drivable[r, c])
+
+    def on_corridor(self, xy: NDArray[np.float64]) -> bool:
+        """Whether ``xy`` is on one of the route's roads (with the margin)."""
+        r, c = self._cell(xy)
+        h, w = self.corridor.shape
+        return bool(0 <= r < h and 0 <= c < w and self.corridor[r, c])
+
+    def cut(self, length_m: float) -> DriveRoute:
+        """The first ``length_m`` metres of the lane (the rasters are kept)."""
+        n = int(np.searchsorted(self.s, length_m, side="right"))
+        if n < 2:
+            raise InputError("drive.follow.length_m", f"{length_m} m leaves no lane to drive")
+        used = set(self.edge[:n].tolist())
+        keep = [i for i, e in enumerate(self.edges) if e in used]
+        return DriveRoute([self.edges[i] for i in keep], [self.froms[i] for i in keep], self.xy[:n], self.yaw[:n],
+                          self.s[:n], self.edge[:n], self.width[:n], self.command[:n], self.drivable, self.corridor,
+                          self.origin)
+
+
+def lane_polyline(centre: NDArray[np.float64], offset: NDArray[np.float64], smoothing_m: float) -> NDArray[np.float64]:
+    """The dense centre line ``centre`` shifted ``offset`` metres to its right and smoothed over ``smoothing_m``."""
+    sigma = max(smoothing_m / DENSE_M, 1.0)
+    guide = gaussian_filter1d(centre, max(sigma, 3.0 * float(np.max(offset, initial=0.0)) / DENSE_M, 1.0), axis=0,
+                              mode="nearest")
+    tangent = np.gradient(guide, axis=0)
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
+    offset = gaussian_filter1d(offset, sigma, mode="nearest")
+    xy = centre + offset[:, None] * np.column_stack([tangent[:, 1], -tangent[:, 0]])
+    return gaussian_filter1d(xy, sigma, axis=0, mode="nearest")
+
+
+def _raster(lines: list[tuple[NDArray[np.float64], float]], origin: tuple[float, float], shape: tuple[int, int],
+            margin_m: float) -> NDArray[np.uint8]:
+    out = np.zeros(shape, np.uint8)
+    for coords, width in lines:
+        px = np.round(np.column_stack([(coords[:, 0] - origin[0]) / CELL_M, (origin[1] - coords[:, 1]) / CELL_M]) * 4)
+        thick = max(1, round((width + 2 * margin_m) / CELL_M))
+        cv2.polylines(out, [px.astype(np.int32)], False, 1, thick, cv2.LINE_8, 2)
+    return out
+
+
+def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_m: float = 4.0,
+                margin_m: float = 0.5, command_m: float = 20.0, lookahead_m: float = 10.0, straight_deg: float = 45.0,
+                where: str = "route") -> DriveRoute:
+    """The :class:`DriveRoute` of a chain of edges (checked with :func:`check_route`)."""
+    check_route(graph, edges, froms, where)
+    centre, label = sample_route(graph, list(edges), list(froms), DENSE_M)
+    if len(centre) < 8:
+        raise InputError(where, "the route is shorter than 2 m")
+    width = np.array([road_width(str(graph.edges.highway.iat[e])) for e in label])
+    two_way = np.array([int(graph.edges.oneway.iat[e]) == 0 for e in label])
+    xy = lane_polyline(centre, np.where(two_way, width / 4.0, 0.0), smoothing_m)
+    step = np.hypot(*np.diff(xy, axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(step)])
+    d = np.gradient(xy, axis=0)
+    yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    crossings = route_intersections(graph, label, xy, lookahead_m, straight_deg)
+    command = vertex_commands(xy, crossings, command_m)
+    # Rasters around the route: every road nearby (drivable area) and the route's own roads (corridor).
+    lo, hi = centre.min(axis=0) - RASTER_MARGIN_M, centre.max(axis=0) + RASTER_MARGIN_M
+    origin = (float(lo[0]), float(hi[1]))
+    shape = (int(np.ceil((hi[1] - lo[1]) / CELL_M)) + 1, int(np.ceil((hi[0] - lo[0]) / CELL_M)) + 1)
+    near = []
+    for e in range(graph.num_edges):
+        coords = graph.geometry[e]
+        if np.any(np.all((coords >= lo) & (coords <= hi), axis=1)):
+            near.append((coords, road_width(str(graph.edges.highway.iat[e]))))
+    drivable = _raster(near, origin, shape, margin_m)
+    corridor = _raster([(graph.geometry[e], road_width(str(graph.edges.highway.iat[e]))) for e in set(edges)],
+                       origin, shape, margin_m)
+    return DriveRoute(list(edges), list(froms), xy, yaw, s, label, width, command, drivable, corridor, origin)
+
+
+def command_name(index: int) -> str:
+    """The name of a command index."""
+    return COMMANDS[int(index)]

@@ -1,0 +1,75 @@
+"""The local-path command of Topo-LP (Cai & Wan): a small top-down image of the path ahead from the topometric map.
+
+* **In closed loop** (:func:`map_path`): the localized vertex's next ``PATH_AHEAD_M`` metres of the map's
+  path-integrated chain (``TopometricMap.xy``, the teach drive's odometry), in the frame of that vertex (origin at
+  the vertex, x along the chain's heading there, y to the left). The vehicle's own offset from the teach drive is
+  not in it: the camera image has to tell that.
+* **In training** (:func:`lane_frame_path`): the same from the demonstrations' lane path (recorded in the vehicle
+  frame, :data:`topoloc.drive.demonstrations.LOCAL_PATH_M` metres every metre): re-expressed in the frame of the
+  lane point at the vehicle's progress shifted by ``shift_m`` and turned by ``yaw_rad``, the localization error the
+  paper adds to the path in training.
+* **Raster** (:func:`raster`): ``PATH_PX`` x ``PATH_PX`` pixels, ``PATH_AHEAD_M`` metres ahead (bottom row: the
+  reference point) and half that to either side, the path drawn as a one-pixel anti-aliased line.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+PATH_PX = 32
+PATH_AHEAD_M = 20.0  # as far as the demonstrations record the lane (LOCAL_PATH_M)
+_STEP_M = 1.0
+
+
+def _along(points: NDArray[np.float64], arc: NDArray[np.float64], query: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Points of a polyline (with arc lengths ``arc``) at arc lengths ``query``, extended straight beyond both ends."""
+    out = np.column_stack([np.interp(query, arc, points[:, 0]), np.interp(query, arc, points[:, 1])])
+    for end, sel, a, b in ((0, query < arc[0], 0, 1), (-1, query > arc[-1], -2, -1)):
+        if sel.any():
+            d = points[b] - points[a]
+            d = d / max(float(np.hypot(*d)), 1e-9)
+            out[sel] = points[end] + (query[sel] - arc[end])[:, None] * d
+    return out
+
+
+def _in_frame(points: NDArray[np.float64], origin: NDArray[np.float64], yaw: float) -> NDArray[np.float64]:
+    """Points in the frame at ``origin`` with heading ``yaw`` (x ahead, y left)."""
+    d = points - origin
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.column_stack([d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c])
+
+
+def _reframed(points: NDArray[np.float64], arc: NDArray[np.float64], start: float, yaw_rad: float) -> NDArray[np.float64]:
+    """The polyline's next ``PATH_AHEAD_M`` metres from arc length ``start`` in the frame there (turned by ``yaw_rad``)."""
+    ahead = _along(points, arc, start + np.arange(0.0, PATH_AHEAD_M + _STEP_M, _STEP_M))
+    heading = ahead[2] - ahead[0]
+    return _in_frame(ahead, ahead[0], float(np.arctan2(heading[1], heading[0])) + yaw_rad)
+
+
+def lane_frame_path(path: NDArray[np.float32], shift_m: float = 0.0, yaw_rad: float = 0.0) -> NDArray[np.float64]:
+    """A demonstration step's local path (vehicle frame, points 1, 2, ... m ahead on the lane) in the lane's frame
+    ``shift_m`` along it (see the module docstring)."""
+    pts = np.asarray(path, float)
+    pts = np.vstack([2.0 * pts[0] - pts[1], pts])  # the lane point at the vehicle's progress
+    return _reframed(pts, np.arange(len(pts), dtype=float), float(shift_m), float(yaw_rad))
+
+
+def map_path(xy: NDArray[np.float64], vertex: int) -> NDArray[np.float64]:
+    """The map chain's next metres from ``vertex`` in that vertex's frame (see the module docstring)."""
+    xy = np.asarray(xy, float)
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+    keep = np.concatenate([[True], np.diff(arc) > 1e-6])  # repeated positions (a stop) have no heading
+    return _reframed(xy[keep], arc[keep], float(arc[int(vertex)]), 0.0)
+
+
+def raster(points: NDArray[np.float64]) -> NDArray[np.uint8]:
+    """The path (frame coordinates, metres) drawn top-down as a ``PATH_PX`` x ``PATH_PX`` image (see the module docstring)."""
+    scale = (PATH_PX - 1) / PATH_AHEAD_M
+    cols = (PATH_PX - 1) / 2.0 - points[:, 1] * scale
+    rows = (PATH_PX - 1) - points[:, 0] * scale
+    image = np.zeros((PATH_PX, PATH_PX), np.uint8)
+    pixels = np.round(np.column_stack([cols, rows]) * 16).astype(np.int32)  # 4 fractional bits
+    cv2.polylines(image, [pixels], False, 255, 1, cv2.LINE_AA, shift=4)
+    return image

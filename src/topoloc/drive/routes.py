@@ -1,0 +1,75 @@
+"""The routes of the drive stages: the teach route (evaluation), the training routes, and their simulators.
+
+* The **teach route** is the path of render route ``place.route`` (:func:`topoloc.render.drives.drive_path`,
+  the route of the ``render_places`` teach drive and so of the topometric map), as a chain of road edges
+  whose lane (:mod:`topoloc.drive.lanes`) ends where that path ends.
+* **Training routes** are random walks (:func:`topoloc.motion.route.random_route`, one-way roads respected,
+  cut where they turn back at a dead end) seeded by ``drive.seed``, the route index and the attempt.
+* A route's **simulator** renders the scene around its lane (``render.buildings``, ``render.view_distance_m``)
+  with the camera of the place images (``place.image``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from topoloc.drive.lanes import DriveRoute, build_route, route_froms
+from topoloc.drive.simulator import Simulator, VehicleSpec
+from topoloc.errors import InputError
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.motion.route import random_route
+from topoloc.place.images import make_rig
+from topoloc.render.drives import drive_path
+from topoloc.render.scene import scene_for_path
+
+
+def route_of_edges(graph: RoadGraph, edges: list[int], froms: list[int], conf: dict[str, Any],
+                   where: str = "route") -> DriveRoute:
+    """The drive route of a chain of edges with the ``drive.lane`` and ``place.command`` settings of ``conf``."""
+    lane, cmd = conf["drive"]["lane"], conf["place"]["command"]
+    return build_route(graph, edges, froms, float(lane["smoothing_m"]), float(lane["margin_m"]), float(cmd["distance_m"]),
+                       float(cmd["lookahead_m"]), float(cmd["straight_deg"]), where)
+
+
+def teach_route(graph: RoadGraph, conf: dict[str, Any]) -> DriveRoute:
+    """The whole teach route (see the module docstring)."""
+    path = drive_path(graph, conf["render"], int(conf["place"]["route"]))
+    labels = path.edge_id.tolist()
+    edges = [int(e) for k, e in enumerate(labels) if k == 0 or e != labels[k - 1]]  # the walk may pass a road twice
+    route = route_of_edges(graph, edges, route_froms(graph, edges, path.xy[0]), conf, "place.route")
+    end, _, _ = route.project(path.xy[-1], path.length_m, 50.0, 50.0)
+    return route.cut(end)
+
+
+def evaluation_route(graph: RoadGraph, conf: dict[str, Any]) -> DriveRoute:
+    """The driven part of the teach route: its first ``drive.follow.length_m`` metres."""
+    route = teach_route(graph, conf)
+    length = conf["drive"]["follow"]["length_m"]
+    return route.cut(float(length)) if length is not None else route
+
+
+def random_drive_route(graph: RoadGraph, conf: dict[str, Any], length_m: float, rng: np.random.Generator) -> DriveRoute | None:
+    """A random route of about ``length_m`` (None when the walk is too short or cannot be built)."""
+    edges, froms = random_route(graph, length_m, rng)
+    for i in range(1, len(edges)):
+        if edges[i] == edges[i - 1]:  # turned back at a dead end
+            edges, froms = edges[:i], froms[:i]
+            break
+    if not edges or float(graph.edges.length_m.iloc[edges].sum()) < 0.5 * length_m:
+        return None
+    try:
+        route = route_of_edges(graph, edges, froms, conf)
+    except InputError:
+        return None
+    return route.cut(length_m) if route.length_m > length_m else route
+
+
+def make_simulator(osm: str | None, graph: RoadGraph, route: DriveRoute, conf: dict[str, Any]) -> Simulator:
+    """The simulator of ``route``: its scene, the place images' camera, the ``drive`` vehicle and episode rules."""
+    render = conf["render"]
+    scene = scene_for_path(osm, graph, route.xy, {**render["buildings"], "view_distance_m": float(render["view_distance_m"])},
+                           int(render["seed"]))
+    rig = make_rig(conf["place"]["image"], render)
+    return Simulator(route, scene, rig, VehicleSpec.from_conf(conf["drive"]), float(render["view_distance_m"]))

@@ -1,0 +1,71 @@
+"""Topo-LP: the local-path controller of Cai & Wan (image + a top-down image of the path ahead, no discrete command).
+
+The camera image goes through Topo-DLM's encoder (:class:`topoloc.drive.controller.TopoDLM`: averaged over
+``downsample`` pixels, local-contrast normalised, ``channels`` stages, a layer of ``hidden`` units); the local-path
+image (:mod:`topoloc.drive.local_path`, ``PATH_PX`` square, 0..255) through two strided convolutions (8 and 16
+channels) and a layer of 64 units; the speed through Topo-DLM's speed encoder. A joint layer and **one** head give
+(steer, target speed): the path says where to go, so there is no branch per command. Same losses as Topo-DLM.
+
+``forward`` takes ``(N, C + 2, H, W)`` like Topo-DLM's, with the local-path image in the top-left
+``PATH_PX`` x ``PATH_PX`` pixels of the last plane (in place of the command): the signature of the logged model.
+:meth:`TopoLP.act` is the closed-loop call.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+from torch import nn
+
+from topoloc.drive.controller import TopoDLM
+from topoloc.drive.local_path import PATH_PX
+
+PATH_FEATURES = 64
+
+
+class TopoLP(TopoDLM):
+    """The local-path controller of the module docstring (Topo-DLM's encoders, a path encoder, one head)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        hidden, dropout = int(self.hparams.hidden), float(self.hparams.dropout)
+        self.path_encoder = nn.Sequential(
+            nn.Conv2d(1, 8, 3, 2, 1), nn.ReLU(inplace=True), nn.Conv2d(8, 16, 3, 2, 1), nn.ReLU(inplace=True),
+            nn.Flatten(), nn.Linear(16 * (PATH_PX // 4) ** 2, PATH_FEATURES), nn.ReLU(inplace=True))
+        self.joint = nn.Sequential(nn.Linear(hidden + 64 + PATH_FEATURES, hidden), nn.ReLU(inplace=True), nn.Dropout(dropout))
+        self.branches = nn.ModuleList([nn.Sequential(nn.Linear(hidden, hidden // 2), nn.ReLU(inplace=True),
+                                                     nn.Dropout(dropout), nn.Linear(hidden // 2, self.n_outputs))])
+
+    def _lp_heads(self, images: torch.Tensor, speed: torch.Tensor, paths: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The head's outputs ``(N, n_outputs)`` and the speed prediction of shrunk images and path images (N, P, P)."""
+        feat = self.image_fc(torch.flatten(self.encoder(self._normalize(images)), 1))
+        path = self.path_encoder(paths[:, None].float() / 255.0)
+        joint = self.joint(torch.cat([feat, self.speed_fc(speed[:, None] / self.hparams.max_speed), path], dim=1))
+        return self.branches[0](joint), self.speed_head(feat)[:, 0]
+
+    def forward(self, inputs: torch.Tensor) -> torch.Tensor:
+        """(steer, target speed m/s) ``(N, 2)`` of ``(N, C + 2, H, W)``: image, speed plane, path plane (module docstring)."""
+        c = int(self.hparams.in_channels)
+        speed = inputs[:, c, 0, 0].float()
+        out, _ = self._lp_heads(self._shrink(inputs[:, :c].float()), speed, inputs[:, c + 1, :PATH_PX, :PATH_PX])
+        steer, target = self._control(out, speed)
+        return torch.stack([steer, target * self.hparams.max_speed], dim=1)
+
+    @torch.no_grad()
+    def act(self, image: NDArray[np.uint8], speed: float, path: NDArray[np.uint8]) -> tuple[float, float]:  # type: ignore[override]
+        """Steer and throttle for one camera image (H, W, C) uint8, the speed (m/s) and a local-path image."""
+        self.eval()
+        x = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
+        v = torch.tensor([float(speed)])
+        out, _ = self._lp_heads(self._shrink(x), v, torch.from_numpy(path)[None])
+        steer_t, target_t = self._control(out, v)
+        steer, target = float(steer_t[0]), float(target_t[0])
+        throttle = self.hparams.speed_gain * (target * self.hparams.max_speed - float(speed))
+        return float(np.clip(steer, -1.0, 1.0)), float(np.clip(throttle, -1.0, 1.0))
+
+    def _outputs(self, x: torch.Tensor, speed: torch.Tensor, condition: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The head's output and speed prediction of a batch (``condition``: the path images)."""
+        return self._lp_heads(x, speed, condition)

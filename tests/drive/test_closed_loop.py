@@ -1,0 +1,50 @@
+"""Closed-loop teach and repeat on the town: the replay baseline with ground-truth localization, and a map of
+another route refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.conftest import make_config
+from tests.drive.conftest import drive_conf, route_scene, town_route
+from topoloc.drive.closed_loop import (
+    GroundTruth,
+    ReplayAgent,
+    run_episode,
+    teach_controls,
+    vertex_lane_s,
+)
+from topoloc.drive.expert import Expert, ExpertSettings
+from topoloc.drive.simulator import Simulator, VehicleSpec
+from topoloc.errors import InputError
+from topoloc.place.topometric_map import TopometricMap
+from topoloc.render.rig import StereoRig
+
+
+def lane_map(route, step_m: float = 1.0) -> TopometricMap:
+    """A topometric map with a vertex every metre of the lane (ground truth = path integration)."""
+    s = np.arange(0.0, route.length_m, step_m)
+    xy = np.stack([route.point(v) for v in s])
+    command = np.array([route.command_at(v) for v in s])
+    return TopometricMap(np.zeros((len(s), 4), np.float32), np.zeros((len(s), 4), np.float32), xy, command, xy, "clear_noon")
+
+
+def test_replay_with_ground_truth_follows_the_teach_drive(town, town_graph):
+    drive = drive_conf(follow={"start_lateral_m": 0.0, "start_yaw_deg": 0.0})
+    conf = {"drive": drive, "place": make_config()["place"]}
+    route = town_route(town_graph, "right", drive).cut(175.0)
+    sim = Simulator(route, route_scene(town["osm"], town_graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
+                    VehicleSpec.from_conf(drive), 100.0)
+    topo = lane_map(route)
+    lane_s = vertex_lane_s(route, topo)
+    assert np.allclose(lane_s[:-5], np.arange(len(lane_s) - 5), atol=0.2)
+    expert = Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
+    steer, speed = teach_controls(sim, expert, "clear_noon", 0, lane_s)
+    assert steer.min() < -0.3 and speed.max() > 5.0  # the right turn and the cruise speed were recorded
+    episode = run_episode(sim, ReplayAgent(steer, speed, 0.5), GroundTruth(lane_s), topo, "night", 1, conf, 4)
+    assert episode.outcome == "success"
+    assert np.median(episode.loc_error_m) < 1.0 and len(episode.frames) == 4
+    other = town_route(town_graph, "left", drive)
+    with pytest.raises(InputError, match="do not follow the teach route"):
+        vertex_lane_s(other, topo)

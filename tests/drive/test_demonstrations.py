@@ -1,0 +1,68 @@
+"""Demonstrations: side views teach the recovery (labels steer back towards the lane) without changing the drive,
+and routes can share out the training conditions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.drive.conftest import drive_conf, node_at, route_scene
+from topoloc.drive.demonstrations import SideViews, record, route_conditions
+from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
+from topoloc.drive.lanes import build_route, plan_route
+from topoloc.drive.simulator import SUCCESS, Simulator, VehicleSpec
+from topoloc.render.rig import StereoRig
+
+
+@pytest.fixture(scope="module")
+def short_road(straight_road):
+    graph = straight_road["graph"]
+    drive = drive_conf()
+    edges, froms = plan_route(graph, node_at(graph, 0.0, 60.0), node_at(graph, 400.0, 60.0))
+    route = build_route(graph, edges, froms, drive["lane"]["smoothing_m"], drive["lane"]["margin_m"]).cut(80.0)
+    sim = Simulator(route, route_scene(straight_road["osm"], graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
+                    VehicleSpec.from_conf(drive), 100.0)
+    return drive, sim
+
+
+def test_side_views_label_the_way_back_and_leave_the_drive_alone(short_road):
+    drive, sim = short_road
+    expert = Expert(sim.route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
+    noise = NoiseSettings.from_conf(drive["noise"])
+    plain, status = record(sim, expert, "clear_noon", 3, noise, 2, True, ["clear_noon"], 0)
+    assert status == SUCCESS
+    side, status = record(sim, expert, "clear_noon", 3, noise, 2, True, ["clear_noon"], 0, SideViews(1, 1.5, 10.0))
+    assert status == SUCCESS and len(side) == 2 * len(plain)
+    own, extra = np.arange(0, len(side), 2), np.arange(1, len(side), 2)
+    np.testing.assert_array_equal(side.images[own], plain.images)  # the drive itself is the same
+    np.testing.assert_allclose(side.steer[own], plain.steer)
+    assert side.perturbed[extra].all()
+    lateral, steer = side.lateral[extra], side.steer[extra]
+    assert np.abs(lateral).max() > 1.0 and np.abs(lateral).max() <= 1.6
+    far = np.abs(lateral) > 0.7  # + right of the lane: steer left (+), and the other way round
+    assert far.sum() > 5 and np.all(np.sign(steer[far]) == np.sign(lateral[far]))
+    assert not np.array_equal(side.images[extra], side.images[own])
+
+
+def test_routes_share_out_the_conditions():
+    assert route_conditions(0, 5, None) == [0, 1, 2, 3, 4]
+    assert route_conditions(3, 5, 1) == [3]
+    assert route_conditions(4, 5, 2) == [4, 0]
+    assert route_conditions(1, 2, 5) == [0, 1]
+    assert sorted(c for r in range(5) for c in route_conditions(r, 5, 1)) == [0, 1, 2, 3, 4]
+
+
+def test_steer_balance_draws_sharp_bends_as_often_as_straight_on():
+    from topoloc.drive.demonstrations import LOCAL_PATH_M, Demonstrations
+    from topoloc.drive.train_controller import DemoData
+
+    n = 400
+    steer = np.where(np.arange(n) % 20 == 0, 0.6, 0.02).astype(np.float32)  # one step in 20 in a sharp bend
+    demos = Demonstrations(np.zeros((n, 4, 4, 3), np.uint8), ["clear_noon"], np.repeat([0, 1], n // 2), np.zeros(n, np.int64),
+                           np.full(n, 5.0, np.float32), np.zeros(n, np.int64), steer, np.zeros(n, np.float32),
+                           np.full(n, 5.0, np.float32), np.zeros(n, bool), np.zeros((n, 2)), np.zeros(n), np.zeros(n, np.float32),
+                           np.zeros((n, LOCAL_PATH_M, 2), np.float32))
+    train = {"batch_size": 8, "batches_per_epoch": 1, "seed": 0}
+    share = lambda data: data.weights[steer[data.train_idx] > 0.5].sum() / data.weights.sum()
+    assert np.isclose(share(DemoData(demos, 1, train, 12.0)), 0.05)
+    assert np.isclose(share(DemoData(demos, 1, train | {"steer_balance": True}, 12.0)), 0.5)

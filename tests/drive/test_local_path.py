@@ -1,0 +1,52 @@
+"""Topo-LP's local path: the map's path and the demonstrations' lane path give the same image for the same road,
+the vehicle's own offset is not in it, turns bend it the right way, and the training noise moves it."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from topoloc.drive.local_path import PATH_PX, lane_frame_path, map_path, raster
+
+
+def _arc(radius: float, n: int = 40) -> np.ndarray:
+    """A left-hand quarter circle after 10 m straight, every metre, starting at the origin heading east."""
+    straight = np.column_stack([np.arange(0.0, 10.0), np.zeros(10)])
+    t = np.arange(n) / radius
+    curve = np.column_stack([10.0 + radius * np.sin(t), radius * (1.0 - np.cos(t))])
+    return np.vstack([straight, curve])
+
+
+def _vehicle_frame(points: np.ndarray, origin: np.ndarray, yaw: float) -> np.ndarray:
+    d = points - origin
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.column_stack([d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c]).astype(np.float32)
+
+
+def test_straight_road_is_a_vertical_line_in_the_middle():
+    image = raster(map_path(np.column_stack([np.arange(0.0, 50.0), np.zeros(50)]), 0))
+    cols = np.flatnonzero(image.max(axis=0) > 0)
+    assert set(cols) <= set(range(PATH_PX // 2 - 2, PATH_PX // 2 + 2))
+    assert image[:, PATH_PX // 2 - 1: PATH_PX // 2 + 1].max(axis=1).min() > 100  # every row, ahead to 20 m
+
+
+def test_a_left_turn_bends_left_and_the_vehicle_offset_is_left_out():
+    road = _arc(12.0)
+    left = raster(map_path(road, 0))
+    right = raster(map_path(road * [1, -1], 0))
+    top = lambda im: np.flatnonzero(im[: PATH_PX // 3].max(axis=0) > 0)
+    assert top(left).min() < PATH_PX // 2 - 6 and top(left).max() < PATH_PX // 2
+    assert top(right).max() > PATH_PX // 2 + 5 and top(right).min() > PATH_PX // 2 - 1
+    # The demonstrations record the lane ahead in the vehicle frame; off the lane by 1 m and 8 degrees, the
+    # local path in the lane's frame is the map's.
+    vehicle = _vehicle_frame(road[1:21], np.array([0.0, -1.0]), np.radians(8.0))
+    np.testing.assert_allclose(lane_frame_path(vehicle), map_path(road, 0), atol=0.05)  # chords of 1 m arcs
+    assert np.abs(raster(lane_frame_path(vehicle)).astype(int) - left).mean() < 2.0
+
+
+def test_training_noise_moves_the_path():
+    road = _arc(12.0)
+    vehicle = _vehicle_frame(road[1:21], np.zeros(2), 0.0)
+    ahead = lane_frame_path(vehicle, shift_m=4.0)
+    np.testing.assert_allclose(ahead[:17], map_path(road, 4)[:17], atol=0.05)  # beyond the 20 m recorded: straight on
+    turned = lane_frame_path(vehicle, yaw_rad=np.radians(5.0))  # the frame turned left: the path seen 5 deg right
+    assert np.isclose(np.degrees(np.arctan2(turned[2, 1], turned[2, 0])), -5.0, atol=1e-6)

@@ -1,0 +1,119 @@
+"""The driving simulator and the expert: episodes end as they should, runs repeat exactly, bad routes are refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.drive.conftest import TOWN_ROUTES, drive_conf, node_at, route_scene, town_route
+from topoloc.drive.expert import Expert, ExpertSettings
+from topoloc.drive.lanes import build_route, check_route, plan_route
+from topoloc.drive.simulator import (
+    OFF_ROAD,
+    RUNNING,
+    SUCCESS,
+    WRONG_ROAD,
+    Control,
+    Simulator,
+    VehicleSpec,
+)
+from topoloc.errors import InputError
+from topoloc.render.conditions import CONDITIONS
+from topoloc.render.rig import StereoRig
+
+RIG = StereoRig.kitti(64, 48, 0.54, 1.65)
+
+
+def simulator(town, graph, name: str, drive: dict, length_m: float | None = None) -> Simulator:
+    route = town_route(graph, name, drive)
+    route = route.cut(length_m) if length_m else route
+    return Simulator(route, route_scene(town["osm"], graph, route), RIG, VehicleSpec.from_conf(drive), 100.0)
+
+
+def drive_expert(sim: Simulator, expert: Expert, condition: str, seed: int = 0) -> tuple[str, list[float]]:
+    sim.reset(condition, seed)
+    expert.reset()
+    status, lateral = RUNNING, []
+    while status == RUNNING:
+        _, status = sim.step(expert.control(sim.state))
+        lateral.append(sim.lateral)
+    return status, lateral
+
+
+def test_expert_completes_every_route_in_every_condition(town, town_graph):
+    drive = drive_conf()
+    for name in TOWN_ROUTES:
+        sim = simulator(town, town_graph, name, drive, 175.0)  # through the intersection at 150 m
+        assert sim.route.length_m > 170
+        expert = Expert(sim.route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
+        for condition in CONDITIONS:
+            status, lateral = drive_expert(sim, expert, condition)
+            assert status == SUCCESS, (name, condition)
+            assert np.max(np.abs(lateral)) < 1.0  # stays in its lane, corners included
+            assert sim.t < sim.max_steps
+
+
+def test_turn_commands_come_from_the_graph(town_graph):
+    drive = drive_conf()
+    names = {name: sorted({int(c) for c in town_route(town_graph, name, drive).command}) for name in TOWN_ROUTES}
+    assert names == {"straight": [0, 3], "right": [0, 2], "left": [0, 1]}  # follow + straight / right / left
+
+
+def test_leaving_the_road_is_a_failure(town, town_graph):
+    sim = simulator(town, town_graph, "straight", drive_conf())
+    sim.reset("clear_noon", 0, speed=5.0)
+    status, steps = RUNNING, 0
+    while status == RUNNING:
+        _, status = sim.step(Control(0.6, 0.3))
+        steps += 1
+    assert status == OFF_ROAD and steps < 40
+
+
+def test_a_wrong_turn_is_a_failure(town, town_graph):
+    drive = drive_conf()
+    straight = simulator(town, town_graph, "straight", drive)
+    turning = town_route(town_graph, "right", drive)  # same start, turns right where "straight" goes on
+    expert = Expert(turning, straight.spec, ExpertSettings.from_conf(drive["expert"]))
+    status, _ = drive_expert(straight, expert, "overcast")
+    assert status == WRONG_ROAD
+    assert 140 < straight.s < 175  # just past the intersection at 150 m
+
+
+def test_episodes_are_deterministic_for_a_seed(town, town_graph):
+    drive = drive_conf()
+    sim = simulator(town, town_graph, "left", drive)
+
+    def episode(seed: int) -> tuple[np.ndarray, np.ndarray]:
+        obs = sim.reset("rain", seed, lateral_m=0.3, yaw_deg=2.0)
+        rng = np.random.default_rng(seed)
+        images, states = [obs.image], []
+        for _ in range(30):
+            obs, _ = sim.step(Control(float(rng.uniform(-0.2, 0.2)), 0.5))
+            images.append(obs.image)
+            states.append((sim.state.x, sim.state.y, sim.state.yaw, sim.state.v))
+        return np.stack(images), np.array(states)
+
+    a, b, c = episode(3), episode(3), episode(4)
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    assert not np.array_equal(a[0], c[0]) and not np.array_equal(a[1], c[1])
+
+
+def test_routes_that_cannot_be_driven_are_refused(straight_road, town_graph):
+    graph = straight_road["graph"]
+    north = node_at(graph, 200.0, 120.0)  # the end of the side street, cut off below
+    keep = [e for e in range(graph.num_edges) if north not in (graph.edges.u.iat[e], graph.edges.v.iat[e])]
+    cut = type(graph)(graph.nodes, graph.edges.iloc[keep].reset_index(drop=True), [graph.geometry[e] for e in keep],
+                      graph.crs, graph.virtual_node_spacing_m)
+    with pytest.raises(InputError, match="no drivable route"):
+        plan_route(cut, node_at(graph, 0.0, 60.0), north)  # a disconnected goal
+    edges, froms = plan_route(graph, node_at(graph, 0.0, 60.0), node_at(graph, 400.0, 60.0))
+    oneway = graph.edges.copy()
+    oneway.loc[edges[0], "oneway"] = -1 if froms[0] == oneway.u.iat[edges[0]] else 1
+    against = type(graph)(graph.nodes, oneway, graph.geometry, graph.crs, graph.virtual_node_spacing_m)
+    with pytest.raises(InputError, match="one-way against the route"):
+        check_route(against, edges, froms)
+    with pytest.raises(InputError, match="no drivable route"):
+        plan_route(against, node_at(graph, 0.0, 60.0), node_at(graph, 400.0, 60.0))
+    edges, froms = plan_route(town_graph, node_at(town_graph, 0.0, 150.0), node_at(town_graph, 300.0, 150.0))
+    with pytest.raises(InputError, match="not connected"):
+        build_route(town_graph, edges[::-1], froms[::-1])
