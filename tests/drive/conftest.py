@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.conftest import make_config, write_osm
@@ -29,8 +30,6 @@ def drive_conf(**sections) -> dict:
 
 def node_at(graph: RoadGraph, x: float, y: float) -> int:
     """The graph node nearest to the town position (x, y) metres from its south-west corner."""
-    import numpy as np
-
     ref = graph.nodes[["x", "y"]].to_numpy(float)
     origin = ref.min(axis=0)
     return int(graph.nodes.index[int(np.argmin(np.hypot(*(ref - origin - [x, y]).T)))])

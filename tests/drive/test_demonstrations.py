@@ -7,10 +7,17 @@ import numpy as np
 import pytest
 
 from tests.drive.conftest import drive_conf, node_at, route_scene
-from topoloc.drive.demonstrations import SideViews, record, route_conditions
+from topoloc.drive.demonstrations import (
+    LOCAL_PATH_M,
+    Demonstrations,
+    SideViews,
+    record,
+    route_conditions,
+)
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
 from topoloc.drive.lanes import build_route, plan_route
 from topoloc.drive.simulator import SUCCESS, Simulator, VehicleSpec
+from topoloc.drive.train_controller import DemoData
 from topoloc.render.rig import StereoRig
 
 
@@ -53,9 +60,6 @@ def test_routes_share_out_the_conditions():
 
 
 def test_steer_balance_draws_sharp_bends_as_often_as_straight_on():
-    from topoloc.drive.demonstrations import LOCAL_PATH_M, Demonstrations
-    from topoloc.drive.train_controller import DemoData
-
     n = 400
     steer = np.where(np.arange(n) % 20 == 0, 0.6, 0.02).astype(np.float32)  # one step in 20 in a sharp bend
     demos = Demonstrations(np.zeros((n, 4, 4, 3), np.uint8), ["clear_noon"], np.repeat([0, 1], n // 2), np.zeros(n, np.int64),

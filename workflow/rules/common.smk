@@ -213,11 +213,10 @@ def place_conf(split):
     return {"split": split, "render": render, "place": sliced}
 
 
-def drive_conf(*drive_keys):
-    """The config slice of a drive stage: the named drive keys, the place keys of the camera and the teach route,
-    and the render keys of the route and the scene."""
+def drive_conf(drive_keys, place_keys):
+    """The config slice of a drive stage: the named drive and place keys (the camera, the teach route, and what
+    the stage reads of the place localization), and the render keys of the route and the scene."""
     unused = ("routes", "conditions", "sheet", "width", "height", "baseline_m")
     return {"drive": {k: config["drive"][k] for k in drive_keys},
-            "place": {k: config["place"][k] for k in ("route", "image", "command", "teach_condition", "repeat_conditions",
-                                                      "odometry_noise", "localize")},
+            "place": {k: config["place"][k] for k in place_keys},
             "render": {k: v for k, v in config["render"].items() if k not in unused}}

@@ -17,7 +17,8 @@ rule simulate_demonstrations:
             labels={"region": "{region}", "figure": "demonstrations"},
         ),
     params:
-        conf=drive_conf("seed", "vehicle", "episode", "lane", "expert", "noise", "demonstrations", "follow"),
+        conf=drive_conf(("seed", "vehicle", "episode", "lane", "expert", "noise", "demonstrations"),
+                        ("route", "image", "command")),
         code=code("topoloc.drive.simulate_demonstrations"),
     log:
         "results/{region}/logs/simulate_demonstrations.log",
@@ -96,7 +97,8 @@ rule follow_route:
             labels={"region": "{region}", "figure": "frame strip"},
         ),
     params:
-        conf=drive_conf("seed", "threads", "vehicle", "episode", "lane", "expert", "demonstrations", "follow"),
+        conf=drive_conf(("seed", "threads", "vehicle", "episode", "lane", "expert", "demonstrations", "follow"),
+                        ("route", "image", "command", "teach_condition", "repeat_conditions", "odometry_noise", "localize")),
         code=code("topoloc.drive.follow_route"),
     log:
         "results/{region}/logs/follow_route.log",

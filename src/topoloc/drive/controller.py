@@ -66,12 +66,12 @@ def pure_pursuit(points: torch.Tensor, speed: torch.Tensor, wheelbase: float, ma
     The expert aims at the lane point ``look = max(min_lookahead_m, lookahead_s v)`` beyond the rear axle's
     progress, about ``look - wheelbase / 2`` beyond the middle's; the point there is interpolated between the arcs."""
     pts = points.reshape(len(points), -1, 2) * WAYPOINT_SCALE_M
-    arcs = torch.tensor(WAYPOINT_ARCS, dtype=pts.dtype)
+    arcs = torch.tensor(WAYPOINT_ARCS, dtype=pts.dtype, device=pts.device)
     look = torch.clamp(lookahead_s * speed.to(pts.dtype), min=min_lookahead_m)
     at = torch.clamp(look - 0.5 * wheelbase, float(arcs[0]), float(arcs[-1]))
     hi = torch.clamp(torch.searchsorted(arcs, at), 1, len(arcs) - 1)
     w = ((at - arcs[hi - 1]) / (arcs[hi] - arcs[hi - 1]))[:, None]
-    rows = torch.arange(len(pts))
+    rows = torch.arange(len(pts), device=pts.device)
     target = (1 - w) * pts[rows, hi - 1] + w * pts[rows, hi]
     alpha = torch.atan2(target[:, 1], target[:, 0] + 0.5 * wheelbase)
     delta = torch.atan2(2.0 * wheelbase * torch.sin(alpha), look)
@@ -143,7 +143,7 @@ class TopoDLM(L.LightningModule):
         c = int(self.hparams.in_channels)
         images, speed, command = inputs[:, :c].float(), inputs[:, c, 0, 0].float(), inputs[:, c + 1, 0, 0].long()
         out, _ = self._heads(self._shrink(images), speed)
-        steer, target = self._control(out[torch.arange(len(out)), command.clamp(0, len(COMMANDS) - 1)], speed)
+        steer, target = self._control(out[torch.arange(len(out), device=out.device), command.clamp(0, len(COMMANDS) - 1)], speed)
         return torch.stack([steer, target * self.hparams.max_speed], dim=1)
 
     @torch.no_grad()
@@ -162,7 +162,7 @@ class TopoDLM(L.LightningModule):
     def _outputs(self, x: torch.Tensor, speed: torch.Tensor, condition: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The commanded branch's output (N, n_outputs) and the speed prediction of a batch (``condition``: the commands)."""
         out, speed_pred = self._heads(x, speed)
-        return out[torch.arange(len(out)), condition], speed_pred
+        return out[torch.arange(len(out), device=out.device), condition], speed_pred
 
     def _step(self, batch: Any, stage: str) -> torch.Tensor:
         images, speed, condition, target = batch

@@ -7,7 +7,7 @@ expert's steering, throttle and target speed (the labels), whether the step was 
 offset, and the **local path** (the lane's next ``LOCAL_PATH_M`` metres in the vehicle frame, every metre:
 what Topo-LP is given, in its lane's frame). With ``side_views`` each kept step adds views from poses beside the
 vehicle's, labelled with the expert's control from there (:func:`side_view`). Routes take ``conditions_per_route``
-of the conditions (:func:`route_conditions`). Steps closer than ``min_distance_m`` to the evaluation route are dropped,
+of the conditions (:func:`route_conditions`). Steps closer than ``min_distance_m`` to the teach route are dropped,
 so training and evaluation places are disjoint; a route keeping fewer than ``min_steps`` steps is drawn
 again. The last ``val_routes`` routes are for validation.
 """
@@ -208,7 +208,7 @@ def demonstrate(osm: str | None, graph: RoadGraph, conf: dict[str, Any], avoid_x
                 break
         if chosen is None:
             raise InputError("drive.demonstrations.min_distance_m", f"training route {r}: no route keeps "
-                             f"{demo_conf['min_steps']} steps {demo_conf['min_distance_m']} m away from the evaluation route")
+                             f"{demo_conf['min_steps']} steps {demo_conf['min_distance_m']} m away from the teach route")
         sim = make_simulator(chosen)
         expert = Expert(chosen, sim.spec, settings)
         for c in route_conditions(r, len(conditions), demo_conf.get("conditions_per_route")):
@@ -227,5 +227,5 @@ def demonstrate(osm: str | None, graph: RoadGraph, conf: dict[str, Any], avoid_x
     facts |= {f"steps_{name}": float(np.sum(demos.command == i)) for i, name in
               enumerate(("follow", "left", "right", "straight"))}
     if avoid_xy is not None:
-        facts["min_distance_to_evaluation_m"] = float(polyline_distance(demos.xy, avoid_xy).min())
+        facts["min_distance_to_teach_route_m"] = float(polyline_distance(demos.xy, avoid_xy).min())
     return demos, facts

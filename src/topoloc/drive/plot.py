@@ -65,8 +65,8 @@ def demonstrations_sheet(demos: Any, path: str | Path, per_condition: int = 6) -
     frame_grid([r for r in rows if r[1]], path, f"expert demonstrations: {len(demos)} steps")
 
 
-def training_figure(history: pd.DataFrame, path: str | Path) -> None:
-    """Training and validation loss of the controller against the step."""
+def training_figure(history: pd.DataFrame, path: str | Path, name: str = "Topo-DLM") -> None:
+    """Training and validation loss of controller ``name`` against the step."""
     fig, ax = plt.subplots(figsize=(7, 4))
     if "train/loss" in history:
         rows = history.dropna(subset=["train/loss"])
@@ -78,7 +78,8 @@ def training_figure(history: pd.DataFrame, path: str | Path) -> None:
     ax.set_xlabel("step")
     ax.set_yscale("log")
     ax.legend()
-    ax.set_title("Topo-DLM training (weighted MSE of the commanded branch)")
+    branch = " of the commanded branch" if name == "Topo-DLM" else ""  # Topo-LP has one head
+    ax.set_title(f"{name} training (weighted MSE{branch})")
     fig.tight_layout()
     _save(fig, path)
 

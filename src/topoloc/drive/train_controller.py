@@ -167,11 +167,11 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     """Train on ``inputs['demonstrations']``; write ``model``, ``history``, ``metrics`` and ``figure``."""
     drive = conf["drive"]
     demos = Demonstrations.load(inputs["demonstrations"])
-    _, history, metrics = fit(drive, demos, outputs["model"], log_model=bool(drive["train"]["log_model"]),
-                              agent=str(conf.get("controller", "dlm")))
+    agent = str(conf.get("controller", "dlm"))
+    _, history, metrics = fit(drive, demos, outputs["model"], log_model=bool(drive["train"]["log_model"]), agent=agent)
     with atomic_path(outputs["history"]) as tmp:
         history.to_csv(tmp, index=False)
     write_json(outputs["metrics"], metrics)
-    training_figure(history, outputs["figure"])
+    training_figure(history, outputs["figure"], {"dlm": "Topo-DLM", "lp": "Topo-LP"}.get(agent, agent))
     log.info("trained: %s", metrics)
     return metrics
