@@ -49,6 +49,8 @@ WAYPOINT_ARCS = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0)
 #: The points are predicted in units of this many metres.
 WAYPOINT_SCALE_M = 5.0
 OUTPUTS = ("steer", "waypoints")
+#: Display names of the agents, by the name the config and the outputs use.
+AGENT_NAMES = {"dlm": "Topo-DLM", "lp": "Topo-LP", "replay": "replay"}
 
 
 def waypoint_targets(path: NDArray[np.float32]) -> NDArray[np.float32]:

@@ -35,11 +35,11 @@ from topoloc.drive.closed_loop import (
     teach_controls,
     vertex_lane_s,
 )
-from topoloc.drive.controller import TopoDLM, load_controller
+from topoloc.drive.controller import AGENT_NAMES, load_controller
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.plot import frame_grid, paths_figure, success_figure
 from topoloc.drive.routes import evaluation_route, make_simulator
-from topoloc.drive.topo_lp import TopoLP
+from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json, write_text
@@ -52,9 +52,6 @@ from topoloc.render.conditions import check_conditions
 
 log = logging.getLogger(__name__)
 
-AGENT_NAMES = {"dlm": "Topo-DLM", "lp": "Topo-LP", "replay": "replay"}
-#: The agents driven by a trained controller (``train_controller`` per agent), with their class.
-LEARNED = {"dlm": TopoDLM, "lp": TopoLP}
 
 
 def method_name(agent: str, localization: str) -> str:
@@ -94,7 +91,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     topo = TopometricMap.load(inputs["map"])
     lane_s = vertex_lane_s(route, topo)
     image = (int(place["image"]["height"]), int(place["image"]["width"]), 3 if place["image"]["color"] else 1)
-    controllers = {a: load_controller(inputs[f"controller_{a}"], image, cls=LEARNED[a]) for a in follow["agents"] if a in LEARNED}
+    controllers = {a: load_controller(inputs[f"controller_{a}"], image, cls=CONTROLLERS[a]) for a in follow["agents"] if a in CONTROLLERS}
     retrieval = load_model(inputs["model"]) if place_names else None
     sim = make_simulator(inputs.get("osm"), graph, route, conf)
     expert = Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"]))

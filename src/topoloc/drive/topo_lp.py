@@ -69,3 +69,7 @@ class TopoLP(TopoDLM):
     def _outputs(self, x: torch.Tensor, speed: torch.Tensor, condition: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The head's output and speed prediction of a batch (``condition``: the path images)."""
         return self._lp_heads(x, speed, condition)
+
+
+#: The controllers ``train_controller`` trains and ``follow_route`` drives, by agent name.
+CONTROLLERS: dict[str, type[TopoDLM]] = {"dlm": TopoDLM, "lp": TopoLP}

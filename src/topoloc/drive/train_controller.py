@@ -22,11 +22,11 @@ import pandas as pd
 import torch
 from torch.utils.data import DataLoader, Dataset, TensorDataset, WeightedRandomSampler
 
-from topoloc.drive.controller import TopoDLM, waypoint_targets
+from topoloc.drive.controller import AGENT_NAMES, TopoDLM, waypoint_targets
 from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.local_path import lane_frame_path, raster
 from topoloc.drive.plot import training_figure
-from topoloc.drive.topo_lp import TopoLP
+from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json
 from topoloc.place.topometric_map import COMMANDS
@@ -35,8 +35,6 @@ from topoloc.training import fit as fit_module
 
 log = logging.getLogger(__name__)
 
-#: The controllers this stage trains, by agent name.
-CONTROLLERS: dict[str, type[TopoDLM]] = {"dlm": TopoDLM, "lp": TopoLP}
 #: Bins of |steer| that ``train.steer_balance`` draws equally often.
 STEER_BINS = np.array([0.1, 0.2, 0.35, 0.5])
 
@@ -172,6 +170,6 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     with atomic_path(outputs["history"]) as tmp:
         history.to_csv(tmp, index=False)
     write_json(outputs["metrics"], metrics)
-    training_figure(history, outputs["figure"], {"dlm": "Topo-DLM", "lp": "Topo-LP"}.get(agent, agent))
+    training_figure(history, outputs["figure"], AGENT_NAMES[agent])
     log.info("trained: %s", metrics)
     return metrics
