@@ -39,7 +39,8 @@ def town_route(graph: RoadGraph, name: str, drive: dict) -> DriveRoute:
     """One of :data:`TOWN_ROUTES` as a drive route."""
     (a, b) = TOWN_ROUTES[name]
     edges, froms = plan_route(graph, node_at(graph, *a), node_at(graph, *b))
-    return build_route(graph, edges, froms, drive["lane"]["smoothing_m"], drive["lane"]["margin_m"])
+    return build_route(graph, edges, froms, drive["lane"]["smoothing_m"], drive["lane"]["margin_m"],
+                       min_radius_m=drive["lane"]["min_radius_m"])
 
 
 @pytest.fixture(scope="session")

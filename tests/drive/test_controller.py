@@ -28,7 +28,8 @@ def straight(straight_road):
                        network={"channels": [16, 24, 32], "hidden": 64, "dropout": 0.1},
                        demonstrations={"val_routes": 1})
     edges, froms = plan_route(graph, node_at(graph, 0.0, 60.0), node_at(graph, 400.0, 60.0))
-    route = build_route(graph, edges, froms, drive["lane"]["smoothing_m"], drive["lane"]["margin_m"]).cut(260.0)
+    route = build_route(graph, edges, froms, drive["lane"]["smoothing_m"], drive["lane"]["margin_m"],
+                       min_radius_m=drive["lane"]["min_radius_m"]).cut(260.0)
     sim = Simulator(route, route_scene(straight_road["osm"], graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
                     VehicleSpec.from_conf(drive), 100.0)
     return drive, sim

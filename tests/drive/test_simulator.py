@@ -5,9 +5,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.conftest import make_config
 from tests.drive.conftest import TOWN_ROUTES, drive_conf, node_at, route_scene, town_route
 from topoloc.drive.expert import Expert, ExpertSettings
-from topoloc.drive.lanes import build_route, check_route, plan_route
+from topoloc.drive.lanes import (
+    DENSE_M,
+    build_route,
+    check_route,
+    lane_curvature,
+    lane_polyline,
+    plan_route,
+    widen_bends,
+)
+from topoloc.drive.routes import route_of_edges
 from topoloc.drive.simulator import (
     OFF_ROAD,
     RUNNING,
@@ -117,3 +127,29 @@ def test_routes_that_cannot_be_driven_are_refused(straight_road, town_graph):
     edges, froms = plan_route(town_graph, node_at(town_graph, 0.0, 150.0), node_at(town_graph, 300.0, 150.0))
     with pytest.raises(InputError, match="not connected"):
         build_route(town_graph, edges[::-1], froms[::-1])
+
+
+def test_bends_tighter_than_the_vehicle_turns_are_widened():
+    """A 135-degree junction corner smoothed by 4 m still turns on ~1 m; widened, it turns on >= min_radius_m, and
+    the lane away from the corner does not move."""
+    west = np.column_stack([np.arange(-60.0, 0.0, DENSE_M), np.zeros(240)])
+    t = np.arange(0.0, 60.0, DENSE_M)
+    centre = np.vstack([west, np.column_stack([-t / np.sqrt(2), t / np.sqrt(2)])])
+    smoothed = lane_polyline(centre, np.zeros(len(centre)), 4.0)
+    assert lane_curvature(smoothed).max() > 1.0 / 3.86  # the vehicle's turning radius: no car follows this
+    widened = widen_bends(smoothed, 5.0)
+    assert lane_curvature(widened).max() <= 1.0 / 5.0
+    moved = np.hypot(*(widened - smoothed).T)
+    assert moved.max() > 2.0 and moved[:120].max() == 0.0 and moved[-120:].max() == 0.0
+    fold = np.vstack([west, west[::-1]])  # out and back on the same line: no radius would do
+    with pytest.raises(InputError, match="tighter than drive.lane.min_radius_m"):
+        widen_bends(lane_polyline(fold, np.zeros(len(fold)), 4.0), 5.0)
+
+
+def test_a_minimum_radius_the_vehicle_cannot_turn_is_refused(town_graph):
+    edges, froms = plan_route(town_graph, node_at(town_graph, 0.0, 150.0), node_at(town_graph, 300.0, 150.0))
+    conf = {"drive": drive_conf(lane={"min_radius_m": 3.0}), "place": make_config()["place"]}
+    with pytest.raises(InputError, match="drive.lane.min_radius_m: 3.0 m is below the vehicle's turning radius"):
+        route_of_edges(town_graph, edges, froms, conf)
+    conf["drive"]["lane"]["min_radius_m"] = 5.0
+    assert lane_curvature(route_of_edges(town_graph, edges, froms, conf).xy).max() <= 1.0 / 5.0

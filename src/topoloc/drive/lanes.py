@@ -4,9 +4,11 @@ A :class:`DriveRoute` is a chain of road edges, each entered from a node, checke
 restrictions. Its **lane** is the road's centre line shifted to the right (right-hand traffic) by a
 quarter of the carriageway on two-way roads (the middle of the right half) and not at all on one-way
 roads, then smoothed with a Gaussian of ``smoothing_m`` (corners become curves), sampled every
-:data:`DENSE_M`. The carriageway width is the per-class default of the renderer
-(:func:`topoloc.render.textures.road_width`: what the images show; the graph keeps no ``lanes`` /
-``width`` tags). Each lane sample carries its road edge and the **navigation command** of Cai & Wan
+:data:`DENSE_M`; bends still tighter than ``min_radius_m`` (the lane offset on the inside of a junction corner
+can leave a radius of 1 m, which no car can follow) are widened by smoothing them further, locally
+(:func:`widen_bends`), so the vehicle can follow every lane it is given. The carriageway width is the
+per-class default of the renderer (:func:`topoloc.render.textures.road_width`: what the images show; the
+graph keeps no ``lanes`` / ``width`` tags). Each lane sample carries its road edge and the **navigation command** of Cai & Wan
 (``follow``, or ``left`` / ``right`` / ``straight`` within ``command_m`` before an intersection), from
 :func:`topoloc.place.topometric_map.route_intersections`, the rule that labels the topometric map's vertices.
 
@@ -189,6 +191,37 @@ def lane_polyline(centre: NDArray[np.float64], offset: NDArray[np.float64], smoo
     return gaussian_filter1d(xy, sigma, axis=0, mode="nearest")
 
 
+def lane_curvature(xy: NDArray[np.float64]) -> NDArray[np.float64]:
+    """|curvature| (1/m) of a dense polyline, averaged over about a metre (what a vehicle has to follow)."""
+    d = np.gradient(xy, axis=0)
+    yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    step = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
+    return gaussian_filter1d(np.abs(np.gradient(yaw)) / step, 0.5 / DENSE_M, mode="nearest")
+
+
+def widen_bends(xy: NDArray[np.float64], min_radius_m: float, where: str = "route",
+                iterations: int = 400) -> NDArray[np.float64]:
+    """The dense lane ``xy`` with every bend tighter than ``min_radius_m`` widened: the samples in and around such a
+    bend are pulled towards a smoothed copy, repeatedly, until none is left (the rest of the lane is unchanged).
+
+    InputError naming ``where`` when a bend cannot be widened enough (a turn back on the spot).
+    """
+    if min_radius_m <= 0:
+        return xy
+    limit, xy = 1.0 / min_radius_m, np.array(xy, float)
+    for _ in range(iterations):
+        tight = lane_curvature(xy) > limit
+        if not tight.any():
+            return xy
+        weight = np.clip(4.0 * gaussian_filter1d(tight.astype(float), 2.0 / DENSE_M, mode="constant"), 0.0, 1.0)
+        weight[[0, -1]] = 0.0  # the ends stay where they are
+        xy += weight[:, None] * (gaussian_filter1d(xy, 1.0 / DENSE_M, axis=0, mode="nearest") - xy)
+    worst = int(np.argmax(lane_curvature(xy)))
+    s = float(np.hypot(*np.diff(xy[: worst + 1], axis=0).T).sum())
+    raise InputError(where, f"the lane turns on a radius of {1.0 / lane_curvature(xy)[worst]:.1f} m at {s:.0f} m "
+                     f"along it, tighter than drive.lane.min_radius_m = {min_radius_m} even after widening")
+
+
 def _raster(lines: list[tuple[NDArray[np.float64], float]], origin: tuple[float, float], shape: tuple[int, int],
             margin_m: float) -> NDArray[np.uint8]:
     out = np.zeros(shape, np.uint8)
@@ -201,15 +234,16 @@ def _raster(lines: list[tuple[NDArray[np.float64], float]], origin: tuple[float,
 
 def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_m: float = 4.0,
                 margin_m: float = 0.5, command_m: float = 20.0, lookahead_m: float = 10.0, straight_deg: float = 45.0,
-                where: str = "route") -> DriveRoute:
-    """The :class:`DriveRoute` of a chain of edges (checked with :func:`check_route`)."""
+                where: str = "route", min_radius_m: float = 5.0) -> DriveRoute:
+    """The :class:`DriveRoute` of a chain of edges (checked with :func:`check_route`; bends widened to
+    ``min_radius_m`` by :func:`widen_bends`)."""
     check_route(graph, edges, froms, where)
     centre, label = sample_route(graph, list(edges), list(froms), DENSE_M)
     if len(centre) < 8:
         raise InputError(where, "the route is shorter than 2 m")
     width = np.array([road_width(str(graph.edges.highway.iat[e])) for e in label])
     two_way = np.array([int(graph.edges.oneway.iat[e]) == 0 for e in label])
-    xy = lane_polyline(centre, np.where(two_way, width / 4.0, 0.0), smoothing_m)
+    xy = widen_bends(lane_polyline(centre, np.where(two_way, width / 4.0, 0.0), smoothing_m), min_radius_m, where)
     step = np.hypot(*np.diff(xy, axis=0).T)
     s = np.concatenate([[0.0], np.cumsum(step)])
     d = np.gradient(xy, axis=0)

@@ -27,10 +27,18 @@ from topoloc.render.scene import scene_for_path
 
 def route_of_edges(graph: RoadGraph, edges: list[int], froms: list[int], conf: dict[str, Any],
                    where: str = "route") -> DriveRoute:
-    """The drive route of a chain of edges with the ``drive.lane`` and ``place.command`` settings of ``conf``."""
+    """The drive route of a chain of edges with the ``drive.lane`` and ``place.command`` settings of ``conf``.
+
+    InputError naming ``drive.lane.min_radius_m`` when it is below the vehicle's turning radius (the expert could
+    not follow the lane)."""
     lane, cmd = conf["drive"]["lane"], conf["place"]["command"]
+    spec = VehicleSpec.from_conf(conf["drive"])
+    turning = spec.wheelbase_m / np.tan(np.radians(spec.max_steer_deg))
+    if float(lane["min_radius_m"]) < turning:
+        raise InputError("drive.lane.min_radius_m", f"{lane['min_radius_m']} m is below the vehicle's turning radius "
+                         f"({turning:.2f} m at {spec.max_steer_deg} deg and a {spec.wheelbase_m} m wheelbase)")
     return build_route(graph, edges, froms, float(lane["smoothing_m"]), float(lane["margin_m"]), float(cmd["distance_m"]),
-                       float(cmd["lookahead_m"]), float(cmd["straight_deg"]), where)
+                       float(cmd["lookahead_m"]), float(cmd["straight_deg"]), where, float(lane["min_radius_m"]))
 
 
 def teach_route(graph: RoadGraph, conf: dict[str, Any]) -> DriveRoute:
