@@ -153,3 +153,9 @@ def test_a_minimum_radius_the_vehicle_cannot_turn_is_refused(town_graph):
         route_of_edges(town_graph, edges, froms, conf)
     conf["drive"]["lane"]["min_radius_m"] = 5.0
     assert lane_curvature(route_of_edges(town_graph, edges, froms, conf).xy).max() <= 1.0 / 5.0
+    (a, b) = TOWN_ROUTES["right"]
+    edges, froms = plan_route(town_graph, node_at(town_graph, *a), node_at(town_graph, *b))
+    assert not route_of_edges(town_graph, edges, froms, conf).off_corridor().any()
+    conf["drive"]["lane"]["min_radius_m"] = 15.0  # a right turn on a 15 m radius cuts across the corner
+    with pytest.raises(InputError, match="route: the lane leaves the route's roads at"):
+        route_of_edges(town_graph, edges, froms, conf)

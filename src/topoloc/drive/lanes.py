@@ -155,6 +155,16 @@ class DriveRoute:
     def _cell(self, xy: NDArray[np.float64]) -> tuple[int, int]:
         return int((self.origin[1] - xy[1]) / CELL_M), int((xy[0] - self.origin[0]) / CELL_M)
 
+    def off_corridor(self) -> NDArray[np.bool_]:
+        """Which lane samples lie off the route's own roads (a lane smoothed or widened out of a narrow road)."""
+        rows = ((self.origin[1] - self.xy[:, 1]) / CELL_M).astype(int)
+        cols = ((self.xy[:, 0] - self.origin[0]) / CELL_M).astype(int)
+        h, w = self.corridor.shape
+        inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+        off = ~inside
+        off[inside] = self.corridor[rows[inside], cols[inside]] == 0
+        return off
+
     def on_drivable(self, xy: NDArray[np.float64]) -> bool:
         """Whether ``xy`` is on a carriageway (with the margin)."""
         r, c = self._cell(xy)
@@ -236,7 +246,10 @@ def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_
                 margin_m: float = 0.5, command_m: float = 20.0, lookahead_m: float = 10.0, straight_deg: float = 45.0,
                 where: str = "route", min_radius_m: float = 5.0) -> DriveRoute:
     """The :class:`DriveRoute` of a chain of edges (checked with :func:`check_route`; bends widened to
-    ``min_radius_m`` by :func:`widen_bends`)."""
+    ``min_radius_m`` by :func:`widen_bends`).
+
+    InputError naming ``where`` when the lane leaves the route's own roads (no vehicle could follow it and stay on them).
+    """
     check_route(graph, edges, froms, where)
     centre, label = sample_route(graph, list(edges), list(froms), DENSE_M)
     if len(centre) < 8:
@@ -262,7 +275,12 @@ def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_
     drivable = _raster(near, origin, shape, margin_m)
     corridor = _raster([(graph.geometry[e], road_width(str(graph.edges.highway.iat[e]))) for e in set(edges)],
                        origin, shape, margin_m)
-    return DriveRoute(list(edges), list(froms), xy, yaw, s, label, width, command, drivable, corridor, origin)
+    route = DriveRoute(list(edges), list(froms), xy, yaw, s, label, width, command, drivable, corridor, origin)
+    off = route.off_corridor()
+    if off.any():
+        raise InputError(where, f"the lane leaves the route's roads at {s[int(np.argmax(off))]:.0f} m (a bend of a narrow "
+                         f"road tighter than drive.lane.min_radius_m = {min_radius_m} m, or than the smoothing allows)")
+    return route
 
 
 def command_name(index: int) -> str:
