@@ -6,11 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.conftest import make_config
 from tests.drive.conftest import drive_conf, node_at, route_scene
 from topoloc.drive.demonstrations import (
     LOCAL_PATH_M,
     Demonstrations,
     SideViews,
+    demonstrate,
     record,
     route_conditions,
 )
@@ -71,3 +73,15 @@ def test_steer_balance_draws_sharp_bends_as_often_as_straight_on():
     share = lambda data: data.weights[steer[data.train_idx] > 0.5].sum() / data.weights.sum()
     assert np.isclose(share(DemoData(demos, 1, train, 12.0)), 0.05)
     assert np.isclose(share(DemoData(demos, 1, train | {"steer_balance": True}, 12.0)), 0.5)
+
+
+def test_the_stats_tell_noise_injection_from_side_views(short_road):
+    drive, sim = short_road
+    conf = {"drive": drive_conf(noise={"share": 0.3}, demonstrations={"routes": 2, "val_routes": 1, "min_steps": 20,
+                                                                      "conditions": ["clear_noon"], "side_views": 1}),
+            "place": make_config()["place"]}
+    demos, facts = demonstrate(None, None, conf, None, lambda rng: sim.route, lambda route: sim)
+    assert facts["expert_success_rate"] == 1.0 and facts["steps"] == len(demos)
+    assert 0.1 < facts["noise_injected_share"] < 0.6  # of the drive's own steps, as drive.noise.share asks
+    # every side view is off the expert's path: half of the steps, plus the drive's perturbed ones
+    assert facts["perturbed_share"] == pytest.approx(0.5 * (1.0 + facts["noise_injected_share"]))

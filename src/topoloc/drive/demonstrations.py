@@ -193,7 +193,7 @@ def demonstrate(osm: str | None, graph: RoadGraph, conf: dict[str, Any], avoid_x
     settings = ExpertSettings.from_conf(drive["expert"])
     color = bool(conf["place"]["image"]["color"])
     side = SideViews(int(demo_conf["side_views"]), float(demo_conf["side_lateral_m"]), float(demo_conf["side_yaw_deg"]))
-    parts, outcomes = [], []
+    parts, outcomes, injected = [], [], []
     for r in tqdm(range(int(demo_conf["routes"])), desc="demonstration routes", unit="route"):
         chosen = None
         for attempt in range(20):
@@ -216,13 +216,16 @@ def demonstrate(osm: str | None, graph: RoadGraph, conf: dict[str, Any], avoid_x
             seed = int(np.random.SeedSequence([int(drive["seed"]), 43, r, c]).generate_state(1)[0])
             demo, status = record(sim, expert, condition, seed, noise, every, color, conditions, r, side)
             outcomes.append(status)
+            injected.append(demo.perturbed[:: 1 + side.count])  # the drive's own steps (side views follow each)
             parts.append(keep_away(demo, avoid_xy, float(demo_conf["min_distance_m"])))
     demos = Demonstrations.concat(parts)
     if not len(demos):
         raise InputError("drive.demonstrations", "no demonstration step was kept")
     facts = {"steps": float(len(demos)), "routes": float(demo_conf["routes"]), "expert_episodes": float(len(outcomes)),
              "expert_success_rate": float(np.mean([o == SUCCESS for o in outcomes])),
-             "perturbed_share": float(demos.perturbed.mean()), "mean_speed_mps": float(demos.speed.mean()),
+             "perturbed_share": float(demos.perturbed.mean()),
+             "noise_injected_share": float(np.concatenate(injected).mean()) if injected else 0.0,
+             "mean_speed_mps": float(demos.speed.mean()),
              "mean_abs_lateral_m": float(np.abs(demos.lateral).mean())}
     facts |= {f"steps_{name}": float(np.sum(demos.command == i)) for i, name in
               enumerate(("follow", "left", "right", "straight"))}

@@ -1,7 +1,8 @@
 """Stage ``simulate_demonstrations``: the expert's noisy drives on training routes (see :mod:`topoloc.drive.demonstrations`).
 
 Inputs: the region's OSM file (buildings) and road graph. Outputs: ``demonstrations`` (``.npz``), ``stats``
-(counts, the expert's success rate, the perturbed share, the closest step to the teach route) and
+(counts, the expert's success rate, ``noise_injected_share``: the drive's own steps under noise injection,
+``perturbed_share``: the steps off the expert's path, side views included, the closest step to the teach route) and
 ``sheet`` (sample steps of every condition).
 """
 
