@@ -76,7 +76,7 @@ def test_steer_balance_draws_sharp_bends_as_often_as_straight_on():
 
 
 def test_the_stats_tell_noise_injection_from_side_views(short_road):
-    drive, sim = short_road
+    _, sim = short_road
     conf = {"drive": drive_conf(noise={"share": 0.3}, demonstrations={"routes": 2, "val_routes": 1, "min_steps": 20,
                                                                       "conditions": ["clear_noon"], "side_views": 1}),
             "place": make_config()["place"]}
