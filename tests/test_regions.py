@@ -24,11 +24,14 @@ def test_each_region_is_its_file_or_mapping_merged_onto_the_config(tmp_path):
     assert all(r["graph"]["virtual_node_spacing_m"] == 30 for r in regions.values())  # the shared keys
     assert all(r["regions"] == [] for r in regions.values())
     assert region_configs(load()) == {}
+    on_file = region_configs(load(overrides={"regions": [{"file": "k00.yaml", "region": {"name": "k01"}}]}), tmp_path)
+    assert on_file["k01"]["odometry"]["source"] == "kitti_poses" and on_file["k01"]["region"]["osm_file"] == "map.osm"
 
 
 @pytest.mark.parametrize(("entries", "message"), [
     (["k00.yaml", "k00.yaml"], "regions.1 (k00.yaml): region 'k00' is named twice in regions"),
     (["nope.yaml"], "regions.0: nope.yaml: cannot read the region's config file (No such file or directory)"),
+    ([{"file": "nope.yaml"}], "regions.0.file: nope.yaml: cannot read the region's config file"),
     ([{"region": {"name": "x"}, "graph": {"no_such_key": 1}}], "regions.0: config: unknown key under 'graph'"),
     ([{"region": {"name": "x"}, "regions": ["k00.yaml"]}], "regions.0: a region's config cannot name regions itself"),
 ])

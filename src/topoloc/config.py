@@ -115,7 +115,8 @@ def load(path: str | Path | None = None, overrides: Mapping[str, Any] | None = N
 def region_configs(config: Mapping[str, Any], base_dir: str | Path = ".") -> dict[str, dict[str, Any]]:
     """The config of each region of ``config['regions']`` by name (empty when it names none).
 
-    An entry is a config file (relative to ``base_dir``) or a mapping; either is merged onto ``config`` without
+    An entry is a config file (relative to ``base_dir``) or a mapping (which may name a config file under
+    ``file``: the mapping's other keys are merged onto that file's); either is merged onto ``config`` without
     its ``regions`` key, then filled and validated. InputError with one line naming the entry, the file or the
     key: a file that cannot be read, a region named twice, a region config that names regions itself.
     """
@@ -124,16 +125,12 @@ def region_configs(config: Mapping[str, Any], base_dir: str | Path = ".") -> dic
     for index, entry in enumerate(config.get("regions") or []):
         where = f"regions.{index}"
         if isinstance(entry, str):
-            path = Path(base_dir) / entry
-            try:
-                data = yaml.safe_load(path.read_text()) or {}
-            except OSError as err:
-                raise InputError(f"{where}: {entry}", f"cannot read the region's config file ({err.strerror})") from err
-            except yaml.YAMLError as err:
-                raise InputError(f"{where}: {entry}", f"not a YAML file ({str(err).splitlines()[0]})") from err
-            if not isinstance(data, dict):
-                raise InputError(f"{where}: {entry}", "a config file is a YAML mapping")
+            data = _region_file(Path(base_dir) / entry, f"{where}: {entry}")
             where = f"{where} ({entry})"
+        elif "file" in entry:
+            data = deep_merge(_region_file(Path(base_dir) / str(entry["file"]), f"{where}.file: {entry['file']}"),
+                              {k: v for k, v in entry.items() if k != "file"})
+            where = f"{where} ({entry['file']})"
         else:
             data = entry
         if data.get("regions"):
@@ -144,6 +141,19 @@ def region_configs(config: Mapping[str, Any], base_dir: str | Path = ".") -> dic
             raise InputError(where, f"region {name!r} is named twice in regions")
         configs[name] = merged
     return configs
+
+
+def _region_file(path: Path, where: str) -> dict[str, Any]:
+    """The mapping of a region's config file; InputError naming ``where`` when it cannot be read or is not one."""
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except OSError as err:
+        raise InputError(where, f"cannot read the region's config file ({err.strerror})") from err
+    except yaml.YAMLError as err:
+        raise InputError(where, f"not a YAML file ({str(err).splitlines()[0]})") from err
+    if not isinstance(data, dict):
+        raise InputError(where, "a config file is a YAML mapping")
+    return data
 
 
 def dotted_overrides(items: list[str]) -> dict[str, Any]:

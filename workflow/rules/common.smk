@@ -102,7 +102,8 @@ def all_outputs():
         *expand(rules.evaluate_localization.output, region=REGION),
         *expand(rules.localize_repeat.output, region=REGION),
         *expand(rules.build_topometric_map.output, region=REGION),
-        *expand(rules.render_places.output, region=REGION, split=["train", "teach", "repeat"]),
+        *expand(rules.render_places.output, region=REGION,
+                split=["teach", "repeat"] + (["train"] if config["place"]["model_from"] is None else [])),
         *expand(rules.follow_route.output, region=REGION),
     ]
 
@@ -211,6 +212,12 @@ def place_conf(split):
     unused = ("routes", "conditions", "sheet", "width", "height", "baseline_m")
     render = {k: v for k, v in config["render"].items() if k not in unused}
     return {"split": split, "render": render, "place": sliced}
+
+
+def trained_in(region, path):
+    """``path`` (a file of this region: ``{region}`` in it) or, when ``region`` names another region, the same file
+    of that region (a network trained there: place.model_from, drive.controllers_from)."""
+    return path if region is None else path.replace("{region}", str(region))
 
 
 def drive_conf(drive_keys, place_keys):

@@ -64,9 +64,9 @@ rule follow_route:
     input:
         osm=rules.download_osm.output.osm,
         graph=rules.build_graph.output.graph,
-        **{f"controller_{a}": f"results/{{region}}/drive/{a}/controller.ckpt"
+        **{f"controller_{a}": trained_in(config["drive"]["controllers_from"], f"results/{{region}}/drive/{a}/controller.ckpt")
            for a in config["drive"]["follow"]["agents"] if a in ("dlm", "lp")},
-        model=rules.train_retrieval.output.model,
+        model=trained_in(config["place"]["model_from"], rules.train_retrieval.output.model),
         map=rules.build_topometric_map.output.map,
     output:
         episodes="results/{region}/drive/follow/episodes.csv",

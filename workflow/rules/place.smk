@@ -58,7 +58,7 @@ rule train_retrieval:
 rule build_topometric_map:
     """One vertex per teach frame: embedding, path-integrated position, navigation command."""
     input:
-        model=rules.train_retrieval.output.model,
+        model=trained_in(config["place"]["model_from"], rules.train_retrieval.output.model),
         teach="results/{region}/places/teach/places.npz",
         graph=rules.build_graph.output.graph,
     output:
@@ -87,7 +87,7 @@ rule build_topometric_map:
 rule localize_repeat:
     """Repeat drives under every other condition localized on the map: network vs raw correlation; Tables 1/2-style."""
     input:
-        model=rules.train_retrieval.output.model,
+        model=trained_in(config["place"]["model_from"], rules.train_retrieval.output.model),
         map=rules.build_topometric_map.output.map,
         repeat="results/{region}/places/repeat/places.npz",
     output:
