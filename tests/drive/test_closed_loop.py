@@ -48,3 +48,13 @@ def test_replay_with_ground_truth_follows_the_teach_drive(town, town_graph):
     other = town_route(town_graph, "left", drive)
     with pytest.raises(InputError, match="do not follow the teach route"):
         vertex_lane_s(other, topo)
+    # a map of a teach route that comes back past the driven part (KITTI 00's loops): the later vertices are not
+    # projected onto the cut lane, where they would read as 5 m off it
+    there = lane_map(route)
+    back = np.repeat(there.gt_xy[::-1], 2, axis=0) + np.array([0.0, 5.0])  # slowly: more vertices than the way out
+    looped = TopometricMap(*(np.concatenate([a, a, a]) for a in (there.embedding, there.embedding)),
+                           np.concatenate([there.xy, back]), np.concatenate([there.command] * 3),
+                           np.concatenate([there.gt_xy, back]), "clear_noon")
+    short = route.cut(60.0)
+    lane_s = vertex_lane_s(short, looped)
+    assert np.allclose(lane_s[:55], np.arange(55), atol=0.2) and np.all(lane_s[80:] == short.length_m)

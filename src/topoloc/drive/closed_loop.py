@@ -39,10 +39,15 @@ from topoloc.place.topometric_map import COMMANDS, TopometricMap
 def vertex_lane_s(route: DriveRoute, topo: TopometricMap) -> NDArray[np.float64]:
     """Arc length along the lane of every map vertex (ground-truth positions, projected in order).
 
+    Vertices further along the map than the lane is long (a map of the whole teach route, a lane cut to its first
+    metres) are at the lane's end: a route that later comes back past the cut part is not projected onto it.
     InputError when the map's vertices do not follow the route (a map of another route or region).
     """
-    out, s, dist = np.empty(len(topo)), 0.0, []
+    out, s, dist = np.full(len(topo), route.length_m), 0.0, []
+    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(topo.gt_xy, axis=0).T))])
     for k, xy in enumerate(topo.gt_xy):
+        if along[k] > route.length_m + 10.0:
+            break
         s, lateral, _ = route.project(xy, s, 5.0, 10.0)
         out[k] = s
         if s < route.length_m - 1.0:
