@@ -97,16 +97,7 @@ def load(path: str | Path | None = None, overrides: Mapping[str, Any] | None = N
     A config without a region gets ``region.name: default``. InputError with one line naming
     the file or key when it is not a valid config.
     """
-    data: Any = {}
-    if path is not None:
-        try:
-            data = yaml.safe_load(Path(path).read_text()) or {}
-        except OSError as err:
-            raise InputError(path, f"cannot read the config file ({err.strerror})") from err
-        except yaml.YAMLError as err:
-            raise InputError(path, f"not a YAML file ({str(err).splitlines()[0]})") from err
-        if not isinstance(data, dict):
-            raise InputError(path, "a config file is a YAML mapping")
+    data = _yaml_mapping(Path(path), str(path), "the config file") if path is not None else {}
     data = deep_merge(data, overrides or {})
     data.setdefault("region", {"name": "default"})
     return validate_and_fill(data, path)
@@ -125,10 +116,10 @@ def region_configs(config: Mapping[str, Any], base_dir: str | Path = ".") -> dic
     for index, entry in enumerate(config.get("regions") or []):
         where = f"regions.{index}"
         if isinstance(entry, str):
-            data = _region_file(Path(base_dir) / entry, f"{where}: {entry}")
+            data = _yaml_mapping(Path(base_dir) / entry, f"{where}: {entry}")
             where = f"{where} ({entry})"
         elif "file" in entry:
-            data = deep_merge(_region_file(Path(base_dir) / str(entry["file"]), f"{where}.file: {entry['file']}"),
+            data = deep_merge(_yaml_mapping(Path(base_dir) / str(entry["file"]), f"{where}.file: {entry['file']}"),
                               {k: v for k, v in entry.items() if k != "file"})
             where = f"{where} ({entry['file']})"
         else:
@@ -143,12 +134,12 @@ def region_configs(config: Mapping[str, Any], base_dir: str | Path = ".") -> dic
     return configs
 
 
-def _region_file(path: Path, where: str) -> dict[str, Any]:
-    """The mapping of a region's config file; InputError naming ``where`` when it cannot be read or is not one."""
+def _yaml_mapping(path: Path, where: str, what: str = "the region's config file") -> dict[str, Any]:
+    """The mapping of a config file; InputError naming ``where`` when it cannot be read or is not one."""
     try:
         data = yaml.safe_load(path.read_text()) or {}
     except OSError as err:
-        raise InputError(where, f"cannot read the region's config file ({err.strerror})") from err
+        raise InputError(where, f"cannot read {what} ({err.strerror})") from err
     except yaml.YAMLError as err:
         raise InputError(where, f"not a YAML file ({str(err).splitlines()[0]})") from err
     if not isinstance(data, dict):
