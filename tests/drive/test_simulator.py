@@ -146,7 +146,7 @@ def test_bends_tighter_than_the_vehicle_turns_are_widened():
         widen_bends(lane_polyline(fold, np.zeros(len(fold)), 4.0), 5.0)
 
 
-def test_a_minimum_radius_the_vehicle_cannot_turn_is_refused(town_graph):
+def test_a_radius_the_vehicle_cannot_turn_and_a_lane_off_its_roads_are_refused(town_graph):
     edges, froms = plan_route(town_graph, node_at(town_graph, 0.0, 150.0), node_at(town_graph, 300.0, 150.0))
     conf = {"drive": drive_conf(lane={"min_radius_m": 3.0}), "place": make_config()["place"]}
     with pytest.raises(InputError, match="drive.lane.min_radius_m: 3.0 m is below the vehicle's turning radius"):
