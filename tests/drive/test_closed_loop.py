@@ -16,6 +16,7 @@ from topoloc.drive.closed_loop import (
     vertex_lane_s,
 )
 from topoloc.drive.expert import Expert, ExpertSettings
+from topoloc.drive.follow_route import intersections
 from topoloc.drive.simulator import Simulator, VehicleSpec
 from topoloc.errors import InputError
 from topoloc.place.topometric_map import TopometricMap
@@ -58,3 +59,8 @@ def test_replay_with_ground_truth_follows_the_teach_drive(town, town_graph):
     short = route.cut(60.0)
     lane_s = vertex_lane_s(short, looped)
     assert np.allclose(lane_s[:55], np.arange(55), atol=0.2) and np.all(lane_s[80:] == short.length_m)
+
+
+def test_intersections_count_each_stretch_of_a_turn_command():
+    assert intersections([0, 0, 1, 1, 0, 2, 2, 0, 1]) == 3  # left, right, left again: three, not two command types
+    assert intersections([3, 3, 1, 1]) == 2 and intersections([0, 0]) == 0 and intersections([]) == 0

@@ -70,6 +70,12 @@ def paper_table(summary: pd.DataFrame, column: str, held_out: list[str], fmt: st
     return "\n".join(lines)
 
 
+def intersections(command: np.ndarray) -> int:
+    """Intersections on a stretch of map vertices: the runs of a command other than ``follow`` (index 0)."""
+    command = np.asarray(command)
+    return int(np.sum((command[1:] != 0) & (command[1:] != command[:-1])) + (len(command) > 0 and command[0] != 0))
+
+
 def place_localization(name: str, topo: TopometricMap, model: Any, localize: dict[str, Any]) -> PlaceLocalization:
     """A new localization by the registered place localizer ``name``."""
     return PlaceLocalization(cast(PlaceLocalizer, make(name, PLACE_OBSERVATIONS)), topo, model, localize)
@@ -133,7 +139,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         summary.to_csv(tmp, index=False, float_format="%.4f")
     steps_per_s = float(episodes.steps.sum() / (episodes.steps / episodes.steps_per_s).sum())
     facts = {"route_length_m": route.length_m, "drives": float(len(episodes)), "steps_per_s": steps_per_s,
-             "turns": float(len({int(c) for c in topo.command[lane_s < route.length_m]} - {0}))}
+             "intersections": float(intersections(topo.command[lane_s < route.length_m]))}
     parts = [(f"# Route following in closed loop (teach: {place['teach_condition']}; controller trained under "
              f"{', '.join(trained)}; held out: {', '.join(held_out) or 'none'})"), "",
              (f"{int(follow['repeats'])} repeat drive(s) per condition and agent over the first {route.length_m:.0f} m "
