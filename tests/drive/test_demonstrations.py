@@ -73,6 +73,12 @@ def test_steer_balance_draws_sharp_bends_as_often_as_straight_on():
     share = lambda data: data.weights[steer[data.train_idx] > 0.5].sum() / data.weights.sum()
     assert np.isclose(share(DemoData(demos, 1, train, 12.0)), 0.05)
     assert np.isclose(share(DemoData(demos, 1, train | {"steer_balance": True}, 12.0)), 0.5)
+    # Topo-LP's path noise: drawn anew for every training draw, once per validation step (epochs compare)
+    demos.path[:] = np.column_stack([np.arange(1.0, LOCAL_PATH_M + 1), np.zeros(LOCAL_PATH_M)])[None].astype(np.float32)
+    data = DemoData(demos, 1, train, 12.0, {"shift_m": 2.0, "yaw_deg": 3.0})
+    val, fit = data._steps(data.val_idx, 1), data._steps(data.train_idx, 0)
+    assert all(np.array_equal(val[i][2], val[i][2]) for i in range(5))
+    assert not all(np.array_equal(fit[i][2], fit[i][2]) for i in range(5))
 
 
 def test_the_stats_tell_noise_injection_from_side_views(short_road):

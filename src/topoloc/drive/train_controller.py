@@ -52,12 +52,14 @@ def _tensors(demos: Demonstrations, idx: np.ndarray, max_speed: float) -> Tensor
 
 class PathSteps(Dataset):
     """Steps with their local-path image (Topo-LP): the lane path in the lane's frame, shifted along it by
-    N(0, ``shift_m``) and turned by N(0, ``yaw_deg``) per draw (the localization error of the paper's training)."""
+    N(0, ``shift_m``) and turned by N(0, ``yaw_deg``) per draw (the localization error of the paper's training).
+    With ``fixed`` every step keeps one draw (validation: the same data every epoch, so epochs compare)."""
 
     def __init__(self, demos: Demonstrations, idx: np.ndarray, max_speed: float, shift_m: float, yaw_deg: float,
-                 seed: int) -> None:
+                 seed: int, fixed: bool = False) -> None:
         self.demos, self.idx, self.target = demos, idx, _targets(demos, idx, max_speed)
         self.shift_m, self.yaw = float(shift_m), np.radians(float(yaw_deg))
+        self.seed, self.fixed = int(seed), bool(fixed)
         self.rng = np.random.default_rng([seed, 61])
 
     def __len__(self) -> int:
@@ -65,8 +67,9 @@ class PathSteps(Dataset):
 
     def __getitem__(self, i: int) -> tuple[torch.Tensor, ...]:
         k = int(self.idx[i])
-        shift = float(self.rng.normal(0.0, self.shift_m)) if self.shift_m else 0.0
-        turn = float(self.rng.normal(0.0, self.yaw)) if self.yaw else 0.0
+        rng = np.random.default_rng([self.seed, 61, i]) if self.fixed else self.rng
+        shift = float(rng.normal(0.0, self.shift_m)) if self.shift_m else 0.0
+        turn = float(rng.normal(0.0, self.yaw)) if self.yaw else 0.0
         path = raster(lane_frame_path(self.demos.path[k], shift, turn))
         return (torch.from_numpy(self.demos.images[k]), torch.tensor(self.demos.speed[k]), torch.from_numpy(path),
                 torch.from_numpy(self.target[i]))
@@ -107,7 +110,7 @@ class DemoData(L.LightningDataModule):
         if self.path_noise is None:
             return _tensors(self.demos, idx, self.max_speed)
         return PathSteps(self.demos, idx, self.max_speed, self.path_noise["shift_m"], self.path_noise["yaw_deg"],
-                         int(self.train_conf["seed"]) * 2 + stream)
+                         int(self.train_conf["seed"]) * 2 + stream, fixed=stream == 1)
 
 
 def build_model(drive: dict[str, Any], demos: Demonstrations, agent: str = "dlm") -> TopoDLM:
