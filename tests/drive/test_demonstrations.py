@@ -13,6 +13,7 @@ from topoloc.drive.demonstrations import (
     Demonstrations,
     SideViews,
     demonstrate,
+    local_path,
     record,
     route_conditions,
 )
@@ -91,3 +92,12 @@ def test_the_stats_tell_noise_injection_from_side_views(short_road):
     assert 0.1 < facts["noise_injected_share"] < 0.6  # of the drive's own steps, as drive.noise.share asks
     # every side view is off the expert's path: half of the steps, plus the drive's perturbed ones
     assert facts["perturbed_share"] == pytest.approx(0.5 * (1.0 + facts["noise_injected_share"]))
+
+
+def test_the_local_path_goes_on_straight_past_the_routes_end(short_road):
+    _, sim = short_road
+    route = sim.route
+    s = route.length_m - 5.0
+    path = local_path(route, s, route.point(s), float(route.yaw[route.index(s)]))
+    np.testing.assert_allclose(path[:, 0], np.arange(1.0, LOCAL_PATH_M + 1), atol=0.05)  # not piled up at the end
+    np.testing.assert_allclose(path[:, 1], 0.0, atol=0.05)

@@ -46,8 +46,9 @@ def as_input(image: NDArray[np.uint8], color: bool) -> NDArray[np.uint8]:
 
 
 def local_path(route: DriveRoute, s: float, xy: NDArray[np.float64], yaw: float) -> NDArray[np.float32]:
-    """The lane's next :data:`LOCAL_PATH_M` metres from arc length ``s``, every metre, in the vehicle frame (x ahead, y left)."""
-    pts = np.stack([route.point(s + d) for d in range(1, LOCAL_PATH_M + 1)]) - xy
+    """The lane's next :data:`LOCAL_PATH_M` metres from arc length ``s``, every metre, in the vehicle frame (x ahead, y left);
+    near the route's end the lane goes on straight (:meth:`DriveRoute.point_ahead`), as the expert aims."""
+    pts = np.stack([route.point_ahead(s + d) for d in range(1, LOCAL_PATH_M + 1)]) - xy
     c, sn = np.cos(yaw), np.sin(yaw)
     return np.column_stack([pts[:, 0] * c + pts[:, 1] * sn, -pts[:, 0] * sn + pts[:, 1] * c]).astype(np.float32)
 

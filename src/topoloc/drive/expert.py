@@ -80,10 +80,7 @@ class Expert:
         rear = np.array([state.x, state.y])
         self.s_rear, _, _ = route.project(rear, self.s_rear)
         look = max(cfg.min_lookahead_m, cfg.lookahead_s * state.v)
-        target = route.point(self.s_rear + look)
-        if self.s_rear + look > route.length_m:  # beyond the end: extend the lane straight on
-            extra = self.s_rear + look - route.length_m
-            target = route.xy[-1] + extra * np.array([np.cos(route.yaw[-1]), np.sin(route.yaw[-1])])
+        target = route.point_ahead(self.s_rear + look)
         alpha = np.arctan2(target[1] - rear[1], target[0] - rear[0]) - state.yaw
         alpha = (alpha + np.pi) % (2 * np.pi) - np.pi
         delta = np.arctan2(2.0 * spec.wheelbase_m * np.sin(alpha), look)

@@ -136,6 +136,12 @@ class DriveRoute:
         """Lane position at arc length ``s`` (clamped to the ends)."""
         return np.array([np.interp(s, self.s, self.xy[:, 0]), np.interp(s, self.s, self.xy[:, 1])])
 
+    def point_ahead(self, s: float) -> NDArray[np.float64]:
+        """Lane position at arc length ``s``, the lane extended straight on beyond its end (what a driver aims at there)."""
+        if s <= self.length_m:
+            return self.point(s)
+        return self.xy[-1] + (s - self.length_m) * np.array([np.cos(self.yaw[-1]), np.sin(self.yaw[-1])])
+
     def project(self, xy: NDArray[np.float64], near_s: float | None = None, back_m: float = 10.0,
                 ahead_m: float = 30.0) -> tuple[float, float, float]:
         """Arc length, signed lateral offset (+ right of the lane) and lane heading of the point nearest to ``xy``,
