@@ -124,8 +124,28 @@ def side_view(sim: Simulator, expert: Expert, rng: np.random.Generator, side: Si
     expert.s_rear, expert.last_target = saved
     s, off, _ = sim.route.project(centre, sim.s)
     image = sim._render.render(centre, yaw, sim.t)
-    return (as_input(image, color), state.v, sim.route.command_at(s), label.steer, label.throttle, row_target, True,
-            centre, yaw, off, local_path(sim.route, s, centre, yaw))
+    return step_row(sim.route, image, state.v, s, label, row_target, True, centre, yaw, off, color)
+
+
+def step_row(route: DriveRoute, image: NDArray[np.uint8], speed: float, s: float, label: Control, target_speed: float,
+             perturbed: bool, centre: NDArray[np.float64], yaw: float, lateral: float, color: bool) -> tuple[Any, ...]:
+    """One recorded step in the field order of :class:`Demonstrations` (image first); ``label`` is the expert's control."""
+    return (as_input(image, color), speed, route.command_at(s), label.steer, label.throttle, target_speed, perturbed,
+            centre, yaw, lateral, local_path(route, s, centre, yaw))
+
+
+def from_rows(rows: list[tuple[Any, ...]], sim: Simulator, color: bool, conditions: list[str], condition: str,
+              route_index: int) -> Demonstrations:
+    """The :class:`Demonstrations` of rows of :func:`step_row` recorded on ``sim``'s route under ``condition``."""
+    n = len(rows)
+    cols = list(zip(*rows)) if rows else [[] for _ in range(11)]
+    shape = (0, sim.rig.height, sim.rig.width, 3 if color else 1)
+    return Demonstrations(np.stack(cols[0]) if n else np.zeros(shape, np.uint8), list(conditions),
+                          np.full(n, route_index, np.int64), np.full(n, conditions.index(condition), np.int64),
+                          np.asarray(cols[1], np.float32), np.asarray(cols[2], np.int64), np.asarray(cols[3], np.float32),
+                          np.asarray(cols[4], np.float32), np.asarray(cols[5], np.float32), np.asarray(cols[6], bool),
+                          np.asarray(cols[7], float).reshape(n, 2), np.asarray(cols[8], float), np.asarray(cols[9], np.float32),
+                          np.asarray(cols[10], np.float32).reshape(n, LOCAL_PATH_M, 2))
 
 
 def record(sim: Simulator, expert: Expert, condition: str, seed: int, noise: NoiseSettings, every: int, color: bool,
@@ -142,23 +162,13 @@ def record(sim: Simulator, expert: Expert, condition: str, seed: int, noise: Noi
         label = expert.control(sim.state)
         offset = injector.offset()
         if sim.t % every == 0:
-            centre = sim.centre
-            rows.append((as_input(obs.image, color), obs.speed, sim.route.command_at(sim.s), label.steer, label.throttle,
-                         expert.last_target, offset != 0.0, centre, sim.state.yaw, sim.lateral, local_path(sim.route, sim.s, centre, sim.state.yaw)))
+            rows.append(step_row(sim.route, obs.image, obs.speed, sim.s, label, expert.last_target, offset != 0.0,
+                                 sim.centre, sim.state.yaw, sim.lateral, color))
             rows += [side_view(sim, expert, side_rng, side, color) for _ in range(side.count)]
         obs, status = sim.step(Control(float(np.clip(label.steer + offset, -1, 1)), label.throttle))
     if status != SUCCESS:
         rows = rows[: max(0, len(rows) - (1 + side.count) * (DROP_BEFORE_FAILURE // every))]
-    n = len(rows)
-    cols = list(zip(*rows)) if rows else [[] for _ in range(11)]
-    shape = (0, sim.rig.height, sim.rig.width, 3 if color else 1)
-    demo = Demonstrations(np.stack(cols[0]) if n else np.zeros(shape, np.uint8), list(conditions),
-                          np.full(n, route_index, np.int64), np.full(n, conditions.index(condition), np.int64),
-                          np.asarray(cols[1], np.float32), np.asarray(cols[2], np.int64), np.asarray(cols[3], np.float32),
-                          np.asarray(cols[4], np.float32), np.asarray(cols[5], np.float32), np.asarray(cols[6], bool),
-                          np.asarray(cols[7], float).reshape(n, 2), np.asarray(cols[8], float), np.asarray(cols[9], np.float32),
-                          np.asarray(cols[10], np.float32).reshape(n, LOCAL_PATH_M, 2))
-    return demo, status
+    return from_rows(rows, sim, color, conditions, condition, route_index), status
 
 
 def keep_away(demo: Demonstrations, avoid_xy: NDArray[np.float64] | None, min_distance_m: float) -> Demonstrations:
@@ -174,6 +184,25 @@ def route_conditions(route: int, n: int, per_route: int | None) -> list[int]:
     if per_route is None or per_route >= n:
         return list(range(n))
     return [(route + k) % n for k in range(int(per_route))]
+
+
+def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None, make_route: Any) -> DriveRoute:
+    """Training route ``r``: the first of its seeded draws ``make_route(rng)`` that keeps ``min_steps`` recorded steps
+    ``min_distance_m`` away from ``avoid_xy`` (the same route on every call: DAgger drives the demonstrations' routes)."""
+    drive = conf["drive"]
+    demo_conf = drive["demonstrations"]
+    every = int(demo_conf.get("record_every", 1))
+    step_m = float(drive["expert"]["cruise_mps"]) / float(drive["episode"]["control_hz"])
+    for attempt in range(20):
+        route = make_route(np.random.default_rng([int(drive["seed"]), 41, r, attempt]))
+        if route is None:
+            continue
+        near = polyline_distance(route.xy[::8], avoid_xy) < float(demo_conf["min_distance_m"]) if avoid_xy is not None \
+            else np.zeros(len(route.xy[::8]), bool)
+        if (1.0 - near.mean()) * route.length_m / step_m / every >= int(demo_conf["min_steps"]):
+            return route
+    raise InputError("drive.demonstrations.min_distance_m", f"training route {r}: no route keeps "
+                     f"{demo_conf['min_steps']} steps {demo_conf['min_distance_m']} m away from the teach route")
 
 
 def demonstrate(osm: str | None, graph: RoadGraph, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None,
@@ -196,20 +225,7 @@ def demonstrate(osm: str | None, graph: RoadGraph, conf: dict[str, Any], avoid_x
     side = SideViews(int(demo_conf["side_views"]), float(demo_conf["side_lateral_m"]), float(demo_conf["side_yaw_deg"]))
     parts, outcomes, injected = [], [], []
     for r in tqdm(range(int(demo_conf["routes"])), desc="demonstration routes", unit="route"):
-        chosen = None
-        for attempt in range(20):
-            route = make_route(np.random.default_rng([int(drive["seed"]), 41, r, attempt]))
-            if route is None:
-                continue
-            near = polyline_distance(route.xy[::8], avoid_xy) < float(demo_conf["min_distance_m"]) if avoid_xy is not None \
-                else np.zeros(len(route.xy[::8]), bool)
-            kept = (1.0 - near.mean()) * route.length_m / (settings.cruise_mps / drive["episode"]["control_hz"]) / every
-            if kept >= int(demo_conf["min_steps"]):
-                chosen = route
-                break
-        if chosen is None:
-            raise InputError("drive.demonstrations.min_distance_m", f"training route {r}: no route keeps "
-                             f"{demo_conf['min_steps']} steps {demo_conf['min_distance_m']} m away from the teach route")
+        chosen = training_route(r, conf, avoid_xy, make_route)
         sim = make_simulator(chosen)
         expert = Expert(chosen, sim.spec, settings)
         for c in route_conditions(r, len(conditions), demo_conf.get("conditions_per_route")):
