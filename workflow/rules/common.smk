@@ -227,3 +227,16 @@ def drive_conf(drive_keys, place_keys):
     return {"drive": {k: config["drive"][k] for k in drive_keys},
             "place": {k: config["place"][k] for k in place_keys},
             "render": {k: v for k, v in config["render"].items() if k not in unused}}
+
+
+def controller_conf(controller):
+    """The config slice of train_controller: the training's keys, and with DAgger rounds (drive.dagger) those of the
+    simulator, the expert and the training routes (so a change to them retrains only when the controller drives)."""
+    drive = config["drive"]
+    keys = ("threads", "vehicle", "expert", "network", "train", *(("path_noise",) if controller == "lp" else ()))
+    if drive["dagger"]["rounds"]:
+        conf = drive_conf((*keys, "seed", "episode", "lane", "demonstrations", "dagger"), ("route", "image", "command"))
+        conf["drive"]["follow"] = {k: drive["follow"][k] for k in ("start_lateral_m", "start_yaw_deg")}
+    else:
+        conf = {"drive": {k: drive[k] for k in keys} | {"demonstrations": {"val_routes": drive["demonstrations"]["val_routes"]}}}
+    return {"controller": controller} | conf

@@ -29,9 +29,12 @@ rule simulate_demonstrations:
 
 
 rule train_controller:
-    """Train Topo-DLM or Topo-LP (Lightning); the model is logged to MLflow with its signature."""
+    """Train Topo-DLM or Topo-LP (Lightning; then DAgger rounds in the simulator); the model is logged to MLflow with its
+    signature."""
     input:
         demonstrations=rules.simulate_demonstrations.output.demonstrations,
+        osm=rules.download_osm.output.osm,
+        graph=rules.build_graph.output.graph,
     output:
         model="results/{region}/drive/{controller}/controller.ckpt",
         history="results/{region}/drive/{controller}/history.csv",
@@ -45,10 +48,7 @@ rule train_controller:
     wildcard_constraints:
         controller="dlm|lp",
     params:
-        conf=lambda wildcards: {"controller": wildcards.controller, "drive": {
-            k: config["drive"][k] for k in ("threads", "vehicle", "expert", "network", "train")}
-            | {"demonstrations": {"val_routes": config["drive"]["demonstrations"]["val_routes"]}}
-            | ({"path_noise": config["drive"]["path_noise"]} if wildcards.controller == "lp" else {})},
+        conf=lambda wildcards: controller_conf(wildcards.controller),
         code=code("topoloc.drive.train_controller"),
     log:
         "results/{region}/logs/train_controller_{controller}.log",

@@ -66,7 +66,7 @@ def demonstrations_sheet(demos: Any, path: str | Path, per_condition: int = 6) -
 
 
 def training_figure(history: pd.DataFrame, path: str | Path, name: str = "Topo-DLM") -> None:
-    """Training and validation loss of controller ``name`` against the step."""
+    """Training and validation loss of controller ``name`` against the step (DAgger rounds marked)."""
     fig, ax = plt.subplots(figsize=(7, 4))
     if "train/loss" in history:
         rows = history.dropna(subset=["train/loss"])
@@ -75,6 +75,12 @@ def training_figure(history: pd.DataFrame, path: str | Path, name: str = "Topo-D
         if key in history:
             rows = history.dropna(subset=[key])
             ax.plot(rows.step, rows[key], style, label=key)
+    if "round" in history:  # DAgger: each round trains on from the last
+        for k, rows in history.groupby("round"):
+            if k > 0 and len(rows):
+                ax.axvline(float(rows.step.min()), color="0.6", lw=0.8, ls=":")
+                ax.text(float(rows.step.min()), 1.0, f" DAgger {int(k)}", transform=ax.get_xaxis_transform(), va="top",
+                        fontsize=8, color="0.4")
     ax.set_xlabel("step")
     ax.set_yscale("log")
     ax.legend()

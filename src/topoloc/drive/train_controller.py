@@ -9,6 +9,9 @@ local-path image of their lane path with the training noise of ``drive.path_nois
 
 Trained by :func:`topoloc.training.fit` (the shared Lightning path): the best checkpoint is written to
 ``model`` and logged to MLflow as a PyTorch model with its signature (``(N, C + 2, H, W)`` -> ``(N, 2)``).
+Then ``drive.dagger.rounds`` DAgger rounds (:mod:`topoloc.drive.dagger`): the controller drives the training routes
+in the simulator (inputs ``osm`` and ``graph``), the expert labels the states it reached, and it trains on,
+``dagger.epochs`` epochs a round; the model of the last round is written.
 """
 
 from __future__ import annotations
@@ -23,11 +26,14 @@ import torch
 from torch.utils.data import DataLoader, Dataset, TensorDataset, WeightedRandomSampler
 
 from topoloc.drive.controller import AGENT_NAMES, TopoDLM, waypoint_targets
+from topoloc.drive.dagger import DaggerSettings, collect
 from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.local_path import lane_frame_path, raster
 from topoloc.drive.plot import training_figure
+from topoloc.drive.routes import make_simulator, random_drive_route, teach_route
 from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.errors import InputError
+from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json
 from topoloc.place.topometric_map import COMMANDS
 from topoloc.training import FitSettings, LoggedModel
@@ -146,9 +152,10 @@ def signature_example(demos: Demonstrations, agent: str = "dlm") -> np.ndarray:
 
 
 def fit(drive: dict[str, Any], demos: Demonstrations, model_path: str, log_model: bool = False,
-        fast_dev_run: bool = False, agent: str = "dlm") -> tuple[TopoDLM, pd.DataFrame, dict[str, float]]:
-    """Train controller ``agent`` on ``demos``; write the best checkpoint to ``model_path``; return the model, history
-    and metrics."""
+        fast_dev_run: bool = False, agent: str = "dlm",
+        init: TopoDLM | None = None) -> tuple[TopoDLM, pd.DataFrame, dict[str, float]]:
+    """Train controller ``agent`` (from the weights of ``init`` when given) on ``demos``; write the best checkpoint to
+    ``model_path``; return the model, history and metrics."""
     if agent not in CONTROLLERS:
         raise InputError("controller", f"unknown controller {agent!r} (one of {', '.join(CONTROLLERS)})")
     train = drive["train"]
@@ -159,20 +166,57 @@ def fit(drive: dict[str, Any], demos: Demonstrations, model_path: str, log_model
     settings = FitSettings.from_config(train, gradient_clip=1.0, early_stopping_patience=None, sanity_val_steps=0,
                                        fast_dev_run=fast_dev_run)
     logged = LoggedModel(signature_example(demos, agent), free_axes=1) if log_model else None
-    result = fit_module(lambda: build_model(drive, demos, agent), data, settings, model_path, logged_model=logged)
+    if init is not None:
+        init.train()  # a loaded or acted-with model is in eval mode, and Lightning keeps a module's mode
+    result = fit_module(lambda: init if init is not None else build_model(drive, demos, agent), data, settings, model_path,
+                        logged_model=logged)
     metrics = result.metrics | {"train_steps": float(len(data.train_idx)), "val_steps": float(len(data.val_idx))}
     return result.module, result.history, metrics
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
-    """Train on ``inputs['demonstrations']``; write ``model``, ``history``, ``metrics`` and ``figure``."""
+    """Train on ``inputs['demonstrations']``, then ``drive.dagger.rounds`` DAgger rounds on the training routes (inputs
+    ``osm``, ``graph``); write ``model``, ``history`` (with its ``round``), ``metrics`` and ``figure``."""
     drive = conf["drive"]
     demos = Demonstrations.load(inputs["demonstrations"])
     agent = str(conf.get("controller", "dlm"))
-    _, history, metrics = fit(drive, demos, outputs["model"], log_model=bool(drive["train"]["log_model"]), agent=agent)
+    rounds = DaggerSettings.from_conf(drive["dagger"]).rounds if "dagger" in drive else 0
+    log_model = bool(drive["train"]["log_model"])
+    model, history, metrics = fit(drive, demos, outputs["model"], log_model=log_model and not rounds, agent=agent)
+    if rounds:
+        model, history, metrics = dagger_rounds(conf, inputs, outputs["model"], model, demos, history, metrics, log_model)
     with atomic_path(outputs["history"]) as tmp:
         history.to_csv(tmp, index=False)
     write_json(outputs["metrics"], metrics)
     training_figure(history, outputs["figure"], AGENT_NAMES[agent])
     log.info("trained: %s", metrics)
     return metrics
+
+
+def dagger_rounds(conf: dict[str, Any], inputs: dict[str, str], model_path: str, model: TopoDLM, demos: Demonstrations,
+                  history: pd.DataFrame, metrics: dict[str, float],
+                  log_model: bool) -> tuple[TopoDLM, pd.DataFrame, dict[str, float]]:
+    """The DAgger rounds of :mod:`topoloc.drive.dagger` after the first fit: the last round's model, the history of
+    every fit (steps counted on, ``round`` 0 the first fit) and the metrics (the last fit's, and each round's
+    ``dagger/<k>/...``)."""
+    drive = conf["drive"]
+    settings = DaggerSettings.from_conf(drive["dagger"])
+    agent = str(conf.get("controller", "dlm"))
+    graph = RoadGraph.load(inputs["graph"])
+    osm = inputs.get("osm")
+    avoid = teach_route(graph, conf).xy
+    length = float(drive["demonstrations"]["route_length_m"])
+    round_drive = {**drive, "train": {**drive["train"], "max_epochs": settings.epochs}}
+    histories, facts_all = [history.assign(round=0)], {}
+    for k in range(settings.rounds):
+        steps, facts = collect(model, agent, conf, k, avoid, lambda rng: random_drive_route(graph, conf, length, rng),
+                               lambda route: make_simulator(osm, graph, route, conf))
+        log.info("DAgger round %d: %s", k + 1, facts)
+        facts_all |= {f"dagger/{k + 1}/{key}": value for key, value in facts.items()}
+        if len(steps):
+            demos = Demonstrations.concat([demos, steps])
+        model, fitted, metrics = fit(round_drive, demos, model_path, log_model=log_model and k == settings.rounds - 1,
+                                     agent=agent, init=model)
+        offset = float(histories[-1].step.max()) + 1.0 if len(histories[-1]) else 0.0
+        histories.append(fitted.assign(step=fitted.step + offset, round=k + 1))
+    return model, pd.concat(histories, ignore_index=True), metrics | facts_all

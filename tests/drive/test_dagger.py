@@ -1,0 +1,114 @@
+"""DAgger: the expert takes over from a controller heading off the road and labels every state the controller reached;
+the train_controller stage runs its rounds end to end on the town."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tests.conftest import make_config
+from tests.drive.conftest import drive_conf, node_at, route_scene
+from topoloc.drive import simulate_demonstrations, train_controller
+from topoloc.drive.controller import load_controller
+from topoloc.drive.dagger import DaggerSettings, drive_on_policy, offset_ahead
+from topoloc.drive.expert import Expert, ExpertSettings
+from topoloc.drive.lanes import build_route, plan_route
+from topoloc.drive.simulator import SUCCESS, Simulator, VehicleSpec
+from topoloc.errors import InputError
+from topoloc.render.rig import StereoRig
+
+
+@pytest.fixture(scope="module")
+def road(straight_road):
+    graph = straight_road["graph"]
+    drive = drive_conf(demonstrations={"record_every": 2})
+    edges, froms = plan_route(graph, node_at(graph, 0.0, 60.0), node_at(graph, 400.0, 60.0))
+    route = build_route(graph, edges, froms, drive["lane"]["smoothing_m"], drive["lane"]["margin_m"],
+                        min_radius_m=drive["lane"]["min_radius_m"]).cut(150.0)
+    sim = Simulator(route, route_scene(straight_road["osm"], graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
+                    VehicleSpec.from_conf(drive), 100.0)
+    conf = {"drive": drive, "place": {"image": {"color": True}}}
+    return conf, sim, Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
+
+
+def test_the_offset_ahead_sees_a_car_heading_off_the_lane(road):
+    _, sim, _ = road
+    sim.reset("clear_noon", 0, lateral_m=0.0, yaw_deg=-10.0, speed=5.0)  # turned 10 degrees to the right
+    assert abs(sim.lateral) < 0.05
+    assert offset_ahead(sim, 1.0) == pytest.approx(5.0 * np.sin(np.radians(10.0)), abs=0.15)  # + is right
+    assert offset_ahead(sim, 0.0) == pytest.approx(sim.lateral)
+
+
+class FullLeft:
+    """A controller that steers full left at half throttle, whatever it sees."""
+
+    def act(self, image, speed, command):
+        return 1.0, 0.5
+
+
+class ExpertController:
+    """The expert, acting as the controller (the DAgger drive should then never hand over)."""
+
+    def __init__(self, sim, expert):
+        self.sim, self.expert = sim, Expert(expert.route, expert.spec, expert.settings)
+
+    def act(self, image, speed, command):
+        control = self.expert.control(self.sim.state)
+        return control.steer, control.throttle
+
+
+def test_the_expert_takes_over_from_a_controller_heading_off_the_road(road):
+    conf, sim, expert = road
+    settings = DaggerSettings(rounds=1, epochs=1, takeover_m=1.0, takeover_s=1.0)
+    demo, status, share = drive_on_policy(sim, expert, FullLeft(), "dlm", "clear_noon", 3, conf, ["clear_noon"], 0, settings)
+    assert status == SUCCESS  # the expert kept the car on the road
+    assert 0.2 < share < 0.9  # the controller drove in between, and the car went off its lane every time
+    assert np.abs(demo.lateral).max() < 2.0
+    assert demo.perturbed.all()
+    assert demo.steer.max() < 0.9 and demo.steer.min() < 0  # the labels are the expert's way back, never the full lock
+    assert len(demo) == pytest.approx(sim.t / 2, abs=1)
+
+
+def test_a_controller_that_drives_like_the_expert_keeps_the_wheel(road):
+    conf, sim, expert = road
+    settings = DaggerSettings(rounds=1, epochs=1, takeover_m=1.0, takeover_s=1.0)
+    demo, status, share = drive_on_policy(sim, expert, ExpertController(sim, expert), "dlm", "overcast", 4, conf,
+                                          ["clear_noon", "overcast"], 7, settings)
+    assert status == SUCCESS and share == 0.0
+    assert (demo.route == 7).all() and (demo.condition == 1).all()
+
+
+@pytest.mark.parametrize("key, value", [("rounds", -1), ("takeover_m", 0.0), ("takeover_s", -1.0)])
+def test_bad_dagger_settings_name_their_key(key, value):
+    dagger = {"rounds": 1, "epochs": 2, "takeover_m": 1.0, "takeover_s": 1.0} | {key: value}
+    with pytest.raises(InputError, match=f"drive.dagger.{key}"):
+        DaggerSettings.from_conf(dagger)
+
+
+def test_train_controller_runs_its_dagger_rounds_on_the_town(town, tmp_path):
+    conf = make_config(
+        render={"length_m": 160.0},
+        place={"image": {"width": 64, "height": 48}},
+        drive={"demonstrations": {"routes": 3, "val_routes": 1, "route_length_m": 150, "min_distance_m": 0, "min_steps": 20,
+                                  "side_views": 0},
+               "network": {"channels": [8, 16], "hidden": 32},
+               "train": {"batch_size": 16, "batches_per_epoch": 4, "max_epochs": 1, "max_time_min": None,
+                         "accelerator": "cpu", "log_model": False, "log_every_n_steps": 1},
+               "dagger": {"rounds": 2, "epochs": 1}})
+    conf = {"controller": "dlm", "drive": conf["drive"], "place": conf["place"], "render": conf["render"]}
+    inputs = {"osm": str(town["osm"]), "graph": str(town["graph"])}
+    demo_out = {k: str(tmp_path / f"demos.{ext}") for k, ext in (("demonstrations", "npz"), ("stats", "json"), ("sheet", "png"))}
+    simulate_demonstrations.run(conf, inputs, demo_out)
+    outputs = {k: str(tmp_path / name) for k, name in (("model", "controller.ckpt"), ("history", "history.csv"),
+                                                      ("metrics", "metrics.json"), ("figure", "training.png"))}
+    metrics = train_controller.run(conf, inputs | {"demonstrations": demo_out["demonstrations"]}, outputs)
+    history = pd.read_csv(outputs["history"])
+    assert sorted(history["round"].unique()) == [0, 1, 2]
+    assert history.step.is_monotonic_increasing
+    assert metrics["dagger/1/drives"] == 2.0 and metrics["dagger/2/steps"] > 20  # the two training routes, each round
+    assert json.loads(Path(outputs["metrics"]).read_text()) == pytest.approx(metrics)
+    load_controller(outputs["model"], (48, 64, 3))
