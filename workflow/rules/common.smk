@@ -230,12 +230,14 @@ def drive_conf(drive_keys, place_keys):
 
 
 def controller_conf(controller):
-    """The config slice of train_controller: the training's keys, and with DAgger rounds (drive.dagger) those of the
-    simulator, the expert and the training routes (so a change to them retrains only when the controller drives)."""
+    """The config slice of train_controller: the training's keys, and with DAgger rounds (drive.dagger) or the
+    closed-loop check (drive.check) those of the simulator, the expert and the routes (so a change to them reruns the
+    training only when the controller drives)."""
     drive = config["drive"]
     keys = ("threads", "vehicle", "expert", "network", "train", *(("path_noise",) if controller == "lp" else ()))
-    if drive["dagger"]["rounds"]:
-        conf = drive_conf((*keys, "seed", "episode", "lane", "demonstrations", "dagger"), ("route", "image", "command"))
+    if drive["dagger"]["rounds"] or drive["check"]["routes"]:
+        conf = drive_conf((*keys, "seed", "episode", "lane", "demonstrations", "dagger", "check"),
+                          ("route", "image", "command", "repeat_conditions"))
         conf["drive"]["follow"] = {k: drive["follow"][k] for k in ("start_lateral_m", "start_yaw_deg")}
     else:
         conf = {"drive": {k: drive[k] for k in keys} | {"demonstrations": {"val_routes": drive["demonstrations"]["val_routes"]}}}

@@ -186,22 +186,24 @@ def route_conditions(route: int, n: int, per_route: int | None) -> list[int]:
     return [(route + k) % n for k in range(int(per_route))]
 
 
-def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None, make_route: Any) -> DriveRoute:
+def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None, make_route: Any,
+                   stream: int = 41) -> DriveRoute:
     """Training route ``r``: the first of its seeded draws ``make_route(rng)`` that keeps ``min_steps`` recorded steps
-    ``min_distance_m`` away from ``avoid_xy`` (the same route on every call: DAgger drives the demonstrations' routes)."""
+    ``min_distance_m`` away from ``avoid_xy`` (the same route on every call: DAgger drives the demonstrations' routes;
+    another ``stream`` draws other routes the same way)."""
     drive = conf["drive"]
     demo_conf = drive["demonstrations"]
     every = int(demo_conf.get("record_every", 1))
     step_m = float(drive["expert"]["cruise_mps"]) / float(drive["episode"]["control_hz"])
     for attempt in range(20):
-        route = make_route(np.random.default_rng([int(drive["seed"]), 41, r, attempt]))
+        route = make_route(np.random.default_rng([int(drive["seed"]), stream, r, attempt]))
         if route is None:
             continue
         near = polyline_distance(route.xy[::8], avoid_xy) < float(demo_conf["min_distance_m"]) if avoid_xy is not None \
             else np.zeros(len(route.xy[::8]), bool)
         if (1.0 - near.mean()) * route.length_m / step_m / every >= int(demo_conf["min_steps"]):
             return route
-    raise InputError("drive.demonstrations.min_distance_m", f"training route {r}: no route keeps "
+    raise InputError("drive.demonstrations.min_distance_m", f"route {r} (seed stream {stream}): no route keeps "
                      f"{demo_conf['min_steps']} steps {demo_conf['min_distance_m']} m away from the teach route")
 
 

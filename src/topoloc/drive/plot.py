@@ -65,8 +65,10 @@ def demonstrations_sheet(demos: Any, path: str | Path, per_condition: int = 6) -
     frame_grid([r for r in rows if r[1]], path, f"expert demonstrations: {len(demos)} steps")
 
 
-def training_figure(history: pd.DataFrame, path: str | Path, name: str = "Topo-DLM") -> None:
-    """Training and validation loss of controller ``name`` against the step (DAgger rounds marked)."""
+def training_figure(history: pd.DataFrame, path: str | Path, name: str = "Topo-DLM",
+                    metrics: dict[str, float] | None = None) -> None:
+    """Training and validation loss of controller ``name`` against the step (DAgger rounds marked; the closed-loop
+    check's success rate in the title when ``metrics`` hold it)."""
     fig, ax = plt.subplots(figsize=(7, 4))
     if "train/loss" in history:
         rows = history.dropna(subset=["train/loss"])
@@ -85,7 +87,11 @@ def training_figure(history: pd.DataFrame, path: str | Path, name: str = "Topo-D
     ax.set_yscale("log")
     ax.legend()
     branch = " of the commanded branch" if name == "Topo-DLM" else ""  # Topo-LP has one head
-    ax.set_title(f"{name} training (weighted MSE{branch})")
+    title = f"{name} training (weighted MSE{branch})"
+    if metrics and "check/success_rate" in metrics:
+        title += (f"\nclosed-loop check: {metrics['check/success_rate']:.2f} of {int(metrics['check/routes'])} unseen routes "
+                  f"finished, {metrics['check/share_driven']:.2f} of their length driven")
+    ax.set_title(title, fontsize=10)
     fig.tight_layout()
     _save(fig, path)
 

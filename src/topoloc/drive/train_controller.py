@@ -9,9 +9,11 @@ local-path image of their lane path with the training noise of ``drive.path_nois
 
 Trained by :func:`topoloc.training.fit` (the shared Lightning path): the best checkpoint is written to
 ``model`` and logged to MLflow as a PyTorch model with its signature (``(N, C + 2, H, W)`` -> ``(N, 2)``).
-Then ``drive.dagger.rounds`` DAgger rounds (:mod:`topoloc.drive.dagger`): the controller drives the training routes
+Then ``drive.dagger.rounds`` DAgger rounds (:mod:`topoloc.drive.on_policy`): the controller drives the training routes
 in the simulator (inputs ``osm`` and ``graph``), the expert labels the states it reached, and it trains on,
-``dagger.epochs`` epochs a round; the model of the last round is written.
+``dagger.epochs`` epochs a round; the model of the last round is written. Last, the closed-loop check
+(``drive.check``): the controller alone drives routes it never saw; its success rate is in the metrics (``check/...``)
+and the figure's title.
 """
 
 from __future__ import annotations
@@ -26,9 +28,9 @@ import torch
 from torch.utils.data import DataLoader, Dataset, TensorDataset, WeightedRandomSampler
 
 from topoloc.drive.controller import AGENT_NAMES, TopoDLM, waypoint_targets
-from topoloc.drive.dagger import DaggerSettings, collect
 from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.local_path import lane_frame_path, raster
+from topoloc.drive.on_policy import DaggerSettings, closed_loop_check, collect
 from topoloc.drive.plot import training_figure
 from topoloc.drive.routes import make_simulator, random_drive_route, teach_route
 from topoloc.drive.topo_lp import CONTROLLERS
@@ -175,8 +177,9 @@ def fit(drive: dict[str, Any], demos: Demonstrations, model_path: str, log_model
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
-    """Train on ``inputs['demonstrations']``, then ``drive.dagger.rounds`` DAgger rounds on the training routes (inputs
-    ``osm``, ``graph``); write ``model``, ``history`` (with its ``round``), ``metrics`` and ``figure``."""
+    """Train on ``inputs['demonstrations']``, then ``drive.dagger.rounds`` DAgger rounds on the training routes and the
+    closed-loop check on ``drive.check.routes`` others (inputs ``osm``, ``graph``); write ``model``, ``history`` (with
+    its ``round``), ``metrics`` (``check/...`` among them) and ``figure``."""
     drive = conf["drive"]
     demos = Demonstrations.load(inputs["demonstrations"])
     agent = str(conf.get("controller", "dlm"))
@@ -185,32 +188,46 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     model, history, metrics = fit(drive, demos, outputs["model"], log_model=log_model and not rounds, agent=agent)
     if rounds:
         model, history, metrics = dagger_rounds(conf, inputs, outputs["model"], model, demos, history, metrics, log_model)
+    if int(drive.get("check", {}).get("routes", 0)):
+        metrics |= check(conf, inputs, model)
+        log.info("closed-loop check: %s", {k: v for k, v in metrics.items() if k.startswith("check/")})
     with atomic_path(outputs["history"]) as tmp:
         history.to_csv(tmp, index=False)
     write_json(outputs["metrics"], metrics)
-    training_figure(history, outputs["figure"], AGENT_NAMES[agent])
+    training_figure(history, outputs["figure"], AGENT_NAMES[agent], metrics)
     log.info("trained: %s", metrics)
     return metrics
+
+
+def _route_makers(conf: dict[str, Any], inputs: dict[str, str]) -> tuple[Any, Any, Any]:
+    """The teach route's lane points (kept away from), and the makers of training routes and their simulators."""
+    graph = RoadGraph.load(inputs["graph"])
+    osm = inputs.get("osm")
+    length = float(conf["drive"]["demonstrations"]["route_length_m"])
+    return (teach_route(graph, conf).xy, lambda rng: random_drive_route(graph, conf, length, rng),
+            lambda route: make_simulator(osm, graph, route, conf))
+
+
+def check(conf: dict[str, Any], inputs: dict[str, str], model: TopoDLM) -> dict[str, float]:
+    """The closed-loop check of ``model`` (:func:`topoloc.drive.on_policy.closed_loop_check`)."""
+    avoid, make_route, make_sim = _route_makers(conf, inputs)
+    return closed_loop_check(model.eval(), str(conf.get("controller", "dlm")), conf, avoid, make_route, make_sim)
 
 
 def dagger_rounds(conf: dict[str, Any], inputs: dict[str, str], model_path: str, model: TopoDLM, demos: Demonstrations,
                   history: pd.DataFrame, metrics: dict[str, float],
                   log_model: bool) -> tuple[TopoDLM, pd.DataFrame, dict[str, float]]:
-    """The DAgger rounds of :mod:`topoloc.drive.dagger` after the first fit: the last round's model, the history of
+    """The DAgger rounds of :mod:`topoloc.drive.on_policy` after the first fit: the last round's model, the history of
     every fit (steps counted on, ``round`` 0 the first fit) and the metrics (the last fit's, and each round's
     ``dagger/<k>/...``)."""
     drive = conf["drive"]
     settings = DaggerSettings.from_conf(drive["dagger"])
     agent = str(conf.get("controller", "dlm"))
-    graph = RoadGraph.load(inputs["graph"])
-    osm = inputs.get("osm")
-    avoid = teach_route(graph, conf).xy
-    length = float(drive["demonstrations"]["route_length_m"])
+    avoid, make_route, make_sim = _route_makers(conf, inputs)
     round_drive = {**drive, "train": {**drive["train"], "max_epochs": settings.epochs}}
     histories, facts_all = [history.assign(round=0)], {}
     for k in range(settings.rounds):
-        steps, facts = collect(model, agent, conf, k, avoid, lambda rng: random_drive_route(graph, conf, length, rng),
-                               lambda route: make_simulator(osm, graph, route, conf))
+        steps, facts = collect(model, agent, conf, k, avoid, make_route, make_sim)
         log.info("DAgger round %d: %s", k + 1, facts)
         facts_all |= {f"dagger/{k + 1}/{key}": value for key, value in facts.items()}
         if len(steps):

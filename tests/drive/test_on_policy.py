@@ -1,5 +1,6 @@
-"""DAgger: the expert takes over from a controller heading off the road and labels every state the controller reached;
-the train_controller stage runs its rounds end to end on the town."""
+"""The controller at the wheel: in DAgger the expert takes over from a controller heading off the road and labels
+every state the controller reached; the closed-loop check tells a controller that drives from one that does not; the
+train_controller stage runs both end to end on the town."""
 
 from __future__ import annotations
 
@@ -14,11 +15,13 @@ from tests.conftest import make_config
 from tests.drive.conftest import drive_conf, node_at, route_scene
 from topoloc.drive import simulate_demonstrations, train_controller
 from topoloc.drive.controller import load_controller
-from topoloc.drive.dagger import DaggerSettings, drive_on_policy, offset_ahead
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.lanes import build_route, plan_route
+from topoloc.drive.on_policy import DaggerSettings, closed_loop_check, drive_on_policy, offset_ahead
+from topoloc.drive.routes import make_simulator, random_drive_route
 from topoloc.drive.simulator import SUCCESS, Simulator, VehicleSpec
 from topoloc.errors import InputError
+from topoloc.graph.road_graph import RoadGraph
 from topoloc.render.rig import StereoRig
 
 
@@ -89,17 +92,53 @@ def test_bad_dagger_settings_name_their_key(key, value):
         DaggerSettings.from_conf(dagger)
 
 
-def test_train_controller_runs_its_dagger_rounds_on_the_town(town, tmp_path):
+class FollowsTheSimulator:
+    """The expert of whichever simulator was built last (the closed-loop check builds one per route)."""
+
+    def __init__(self, conf):
+        self.conf, self.sim, self.expert = conf, None, None
+
+    def make_simulator(self, osm, graph, route):
+        self.sim = make_simulator(osm, graph, route, self.conf)
+        self.expert = Expert(route, self.sim.spec, ExpertSettings.from_conf(self.conf["drive"]["expert"]))
+        return self.sim
+
+    def act(self, image, speed, command):
+        control = self.expert.control(self.sim.state)
+        return control.steer, control.throttle
+
+
+def test_the_closed_loop_check_tells_a_driver_from_a_wreck(town):
+    conf = town_conf()
+    graph = RoadGraph.load(town["graph"])
+    driver = FollowsTheSimulator(conf)
+    make_route = lambda rng: random_drive_route(graph, conf, 150.0, rng)
+    good = closed_loop_check(driver, "dlm", conf, None, make_route, lambda route: driver.make_simulator(str(town["osm"]), graph, route))
+    assert good["check/routes"] == 3 and good["check/success_rate"] == 1.0 and good["check/share_driven"] == 1.0
+    assert {k for k in good if k.startswith("check/success_")} == {"check/success_rate", "check/success_overcast",
+                                                                    "check/success_sunset", "check/success_rain"}
+    bad = closed_loop_check(FullLeft(), "dlm", conf, None, make_route,
+                            lambda route: make_simulator(str(town["osm"]), graph, route, conf))
+    assert bad["check/success_rate"] == 0.0 and bad["check/share_driven"] < 0.5
+    assert sum(v for k, v in bad.items() if k in ("check/off_road", "check/wrong_road", "check/reversed")) == 3
+
+
+def town_conf() -> dict:
+    """Drive stages' config on the town: short routes, small images and networks, three repeat conditions."""
     conf = make_config(
         render={"length_m": 160.0},
-        place={"image": {"width": 64, "height": 48}},
+        place={"image": {"width": 64, "height": 48}, "repeat_conditions": ["overcast", "sunset", "rain"]},
         drive={"demonstrations": {"routes": 3, "val_routes": 1, "route_length_m": 150, "min_distance_m": 0, "min_steps": 20,
                                   "side_views": 0},
                "network": {"channels": [8, 16], "hidden": 32},
                "train": {"batch_size": 16, "batches_per_epoch": 4, "max_epochs": 1, "max_time_min": None,
                          "accelerator": "cpu", "log_model": False, "log_every_n_steps": 1},
-               "dagger": {"rounds": 2, "epochs": 1}})
-    conf = {"controller": "dlm", "drive": conf["drive"], "place": conf["place"], "render": conf["render"]}
+               "dagger": {"rounds": 2, "epochs": 1}, "check": {"routes": 3}})
+    return {"controller": "dlm", "drive": conf["drive"], "place": conf["place"], "render": conf["render"]}
+
+
+def test_train_controller_runs_its_dagger_rounds_and_check_on_the_town(town, tmp_path):
+    conf = town_conf()
     inputs = {"osm": str(town["osm"]), "graph": str(town["graph"])}
     demo_out = {k: str(tmp_path / f"demos.{ext}") for k, ext in (("demonstrations", "npz"), ("stats", "json"), ("sheet", "png"))}
     simulate_demonstrations.run(conf, inputs, demo_out)
@@ -111,4 +150,5 @@ def test_train_controller_runs_its_dagger_rounds_on_the_town(town, tmp_path):
     assert history.step.is_monotonic_increasing
     assert metrics["dagger/1/drives"] == 2.0 and metrics["dagger/2/steps"] > 20  # the two training routes, each round
     assert json.loads(Path(outputs["metrics"]).read_text()) == pytest.approx(metrics)
+    assert metrics["check/routes"] == 3 and 0.0 <= metrics["check/success_rate"] <= 1.0
     load_controller(outputs["model"], (48, 64, 3))
