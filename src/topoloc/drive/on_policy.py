@@ -94,9 +94,9 @@ def offset_ahead(sim: Simulator, seconds: float) -> float:
 
 def drive_on_policy(sim: Simulator, expert: Expert, controller: Any, agent: str, condition: str, seed: int,
                     conf: dict[str, Any], conditions: list[str], route_index: int,
-                    settings: DaggerSettings) -> tuple[Demonstrations, str, float]:
+                    settings: DaggerSettings, record: bool = True) -> tuple[Demonstrations, str, float]:
     """One drive of ``sim``'s route by ``controller``, the expert taking over (see the module docstring): its steps
-    labelled by the expert, the outcome and the share of steps the expert drove."""
+    labelled by the expert (none without ``record``), the outcome and the share of steps the expert drove."""
     drive = conf["drive"]
     every = int(drive["demonstrations"].get("record_every", 1))
     color = bool(conf["place"]["image"]["color"])
@@ -110,7 +110,7 @@ def drive_on_policy(sim: Simulator, expert: Expert, controller: Any, agent: str,
     while status == RUNNING:
         label = expert.control(sim.state)
         image, centre, yaw = as_input(obs.image, color), sim.centre, sim.state.yaw
-        if sim.t % every == 0:
+        if record and sim.t % every == 0:
             rows.append(step_row(sim.route, obs.image, obs.speed, sim.s, label, expert.last_target, True, centre, yaw,
                                  sim.lateral, color))
         limit = settings.takeover_m / 3.0 if expert_drives else settings.takeover_m
@@ -176,7 +176,7 @@ def closed_loop_check(controller: Any, agent: str, conf: dict[str, Any], avoid_x
         condition = conditions[r % len(conditions)]
         seed = int(np.random.SeedSequence([int(drive["seed"]), CHECK_STREAM, r]).generate_state(1)[0])
         _, status, _ = drive_on_policy(sim, Expert(route, sim.spec, expert_settings), controller, agent, condition, seed,
-                                       conf, conditions, r, alone)
+                                       conf, conditions, r, alone, record=False)
         rows.append((condition, status, min(1.0, sim.s / max(route.length_m - sim.spec.goal_m, 1e-9))))
     out = {"check/routes": float(routes), "check/success_rate": float(np.mean([s == SUCCESS for _, s, _ in rows])),
            "check/share_driven": float(np.mean([share for _, _, share in rows]))}
