@@ -29,8 +29,8 @@ rule simulate_demonstrations:
 
 
 rule train_controller:
-    """Train Topo-DLM or Topo-LP (Lightning; then DAgger rounds in the simulator); the model is logged to MLflow with its
-    signature."""
+    """Train Topo-DLM or Topo-LP (Lightning; then DAgger rounds in the simulator and the closed-loop check on unseen
+    routes); the model is logged to MLflow with its signature."""
     input:
         demonstrations=rules.simulate_demonstrations.output.demonstrations,
         osm=rules.download_osm.output.osm,
