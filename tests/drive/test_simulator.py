@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.conftest import make_config
+from tests.conftest import make_config, write_osm
 from tests.drive.conftest import TOWN_ROUTES, drive_conf, node_at, route_scene, town_route
+from tests.render.conftest import lonlat
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.lanes import (
     DENSE_M,
@@ -28,8 +29,10 @@ from topoloc.drive.simulator import (
     VehicleSpec,
 )
 from topoloc.errors import InputError
+from topoloc.graph.build_graph import build_road_graph
 from topoloc.render.conditions import CONDITIONS
 from topoloc.render.rig import StereoRig
+from topoloc.render.textures import has_centre_line, road_width
 
 RIG = StereoRig.kitti(64, 48, 0.54, 1.65)
 
@@ -159,3 +162,19 @@ def test_a_radius_the_vehicle_cannot_turn_and_a_lane_off_its_roads_are_refused(t
     conf["drive"]["lane"]["min_radius_m"] = 15.0  # a right turn on a 15 m radius cuts across the corner
     with pytest.raises(InputError, match="route: the lane leaves the route's roads at"):
         route_of_edges(town_graph, edges, froms, conf)
+
+
+@pytest.mark.parametrize(("highway", "oneway", "right_of_centre_m"),
+                         [("residential", "no", 7.0 / 4), ("service", "no", 0.0), ("residential", "yes", 0.0)])
+def test_the_lane_keeps_right_of_a_drawn_centre_line_and_to_the_middle_of_other_roads(tmp_path, highway, oneway,
+                                                                                        right_of_centre_m):
+    """A two-way 7 m residential road has a dashed centre line in the images: keep to the middle of the right half.
+    A two-way 4.5 m service road has none, nor has a one-way road: drive in the middle (what the camera can tell)."""
+    osm = write_osm(tmp_path / "road.osm", {1: lonlat(0.0, 0.0), 2: lonlat(200.0, 0.0)},
+                    [(10, [1, 2], {"highway": highway, "oneway": oneway})])
+    graph, _ = build_road_graph(str(osm), [highway], 20.0)
+    edges, froms = plan_route(graph, node_at(graph, 0.0, 0.0), node_at(graph, 200.0, 0.0))
+    route = build_route(graph, edges, froms)
+    centre_y = float(np.mean(graph.geometry[edges[0]][:, 1]))
+    assert has_centre_line(road_width(highway), oneway == "no") == (right_of_centre_m > 0)
+    assert centre_y - float(np.median(route.xy[:, 1])) == pytest.approx(right_of_centre_m, abs=0.05)  # east: right is south

@@ -2,8 +2,10 @@
 
 A :class:`DriveRoute` is a chain of road edges, each entered from a node, checked against one-way
 restrictions. Its **lane** is the road's centre line shifted to the right (right-hand traffic) by a
-quarter of the carriageway on two-way roads (the middle of the right half) and not at all on one-way
-roads, then smoothed with a Gaussian of ``smoothing_m`` (corners become curves), sampled every
+quarter of the carriageway (the middle of the right half) where the images show a dashed centre line to keep
+right of (two-way roads at least 6 m wide, :func:`topoloc.render.textures.has_centre_line`), and not at all on
+other roads (one-way, or narrower and unmarked: a driver takes the middle, and a camera could not tell a lane
+there from the middle), then smoothed with a Gaussian of ``smoothing_m`` (corners become curves), sampled every
 :data:`DENSE_M`; bends still tighter than ``min_radius_m`` (the lane offset on the inside of a junction corner
 can leave a radius of 1 m, which no car can follow) are widened by smoothing them further, locally
 (:func:`widen_bends`), so the vehicle can follow every lane it is given. The carriageway width is the
@@ -32,7 +34,7 @@ from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.motion.route import sample_route
 from topoloc.place.topometric_map import COMMANDS, route_intersections, vertex_commands
-from topoloc.render.textures import road_width
+from topoloc.render.textures import has_centre_line, road_width
 
 DENSE_M = 0.25
 CELL_M = 0.25
@@ -261,8 +263,8 @@ def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_
     if len(centre) < 8:
         raise InputError(where, "the route is shorter than 2 m")
     width = np.array([road_width(str(graph.edges.highway.iat[e])) for e in label])
-    two_way = np.array([int(graph.edges.oneway.iat[e]) == 0 for e in label])
-    xy = widen_bends(lane_polyline(centre, np.where(two_way, width / 4.0, 0.0), smoothing_m), min_radius_m, where)
+    marked = np.array([has_centre_line(w, int(graph.edges.oneway.iat[e]) == 0) for e, w in zip(label, width)])
+    xy = widen_bends(lane_polyline(centre, np.where(marked, width / 4.0, 0.0), smoothing_m), min_radius_m, where)
     step = np.hypot(*np.diff(xy, axis=0).T)
     s = np.concatenate([[0.0], np.cumsum(step)])
     d = np.gradient(xy, axis=0)

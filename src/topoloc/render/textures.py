@@ -39,11 +39,19 @@ ROAD_WIDTH_M = {"motorway": 14.0, "trunk": 12.0, "primary": 12.0, "secondary": 1
                 "unclassified": 7.0, "residential": 7.0, "living_street": 5.0, "service": 4.5, "road": 6.0}
 PAVING, SIDEWALK, ASPHALT, MARKING = (132, 136, 138), (160, 162, 163), (82, 82, 84), (225, 228, 230)
 SIDEWALK_M = 3.0
+#: Carriageways at least this wide get edge lines, and a dashed centre line when two-way.
+MARKED_WIDTH_M = 6.0
 
 
 def road_width(highway: str) -> float:
     """Carriageway width in metres of an OSM highway class (``*_link`` as 7 m)."""
     return ROAD_WIDTH_M.get(highway, 7.0 if highway.endswith("_link") else 6.0)
+
+
+def has_centre_line(width_m: float, two_way: bool) -> bool:
+    """Whether a carriageway is drawn with a dashed centre line: two-way and at least :data:`MARKED_WIDTH_M` wide.
+    A driver keeps right of such a line and drives in the middle of any other road (:mod:`topoloc.drive.lanes`)."""
+    return bool(two_way and width_m >= MARKED_WIDTH_M)
 
 
 def _periodic_noise(rng: np.random.Generator, shape: tuple[int, int], sigma: float) -> NDArray[np.float32]:
@@ -202,10 +210,10 @@ def draw_ground(roads: list[Road], x0: float, y1: float, shape: tuple[int, int])
         if stop - start < 2.0:
             continue
         thin = max(1, round(0.15 / TEXEL_M))
-        if road.two_way and road.width >= 6.0:
+        if has_centre_line(road.width, road.two_way):
             for piece in _pieces(road.coords, start, stop, 3.0, 5.0):
                 cv2.polylines(img, [_to_px(piece, x0, y1)], False, MARKING, thin, aa, 2)
-        if road.width >= 6.0:
+        if road.width >= MARKED_WIDTH_M:
             for side in (-1.0, 1.0):
                 edge = _offset(road.coords, side * (road.width / 2 - 0.5))
                 for piece in _pieces(edge, start, stop, 1e9, 0.0):
