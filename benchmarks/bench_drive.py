@@ -28,7 +28,7 @@ from topoloc.config import load
 from topoloc.drive.closed_loop import DLMAgent, GroundTruth, PlaceLocalization, vertex_lane_s
 from topoloc.drive.controller import load_controller
 from topoloc.drive.demonstrations import as_input
-from topoloc.drive.routes import evaluation_route, make_simulator
+from topoloc.drive.routes import evaluation_route, image_shape, make_simulator
 from topoloc.drive.simulator import RUNNING, Control
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.place.network import load_model
@@ -48,14 +48,14 @@ def speed(conf: dict, root: Path, steps: int, localizer: str) -> dict[str, float
     topo = TopometricMap.load(root / "topometric_map" / "map.npz")
     lane_s = vertex_lane_s(route, topo)
     place = conf["place"]
-    image = (int(place["image"]["height"]), int(place["image"]["width"]), 3 if place["image"]["color"] else 1)
-    agent = DLMAgent(load_controller(root / "drive" / "dlm" / "controller.ckpt", image), topo)
+    agent = DLMAgent(load_controller(root / "drive" / "dlm" / "controller.ckpt", image_shape(conf)), topo)
     retrieval = load_model(root / "retrieval" / "model.ckpt")
     condition = place["repeat_conditions"][0]
     out = {}
     for name, use_agent, loc in (("render only", False, None), ("render + controller", True, GroundTruth(lane_s)),
                                  ("render + localization", False, "place"), ("closed loop", True, "place")):
-        localization = PlaceLocalization(make(localizer), topo, retrieval, place["localize"]) if loc == "place" else loc
+        localization = PlaceLocalization(make(localizer), topo, retrieval, place["localize"],
+                                         int(place["image"]["height"])) if loc == "place" else loc
         obs = sim.reset(condition, 1)
         if localization is not None:
             localization.start(np.random.default_rng(0))
@@ -87,7 +87,8 @@ def main() -> None:
     conf = {"drive": config["drive"], "place": config["place"], "render": config["render"]}
     root = Path("results") / config["region"]["name"]
     rates = speed(conf, root, args.steps, args.localizer)
-    size = f"{config['place']['image']['width']}x{config['place']['image']['height']}"
+    height, width, _ = image_shape(conf)
+    size = f"{width}x{height}"
     print(f"## Closed-loop steps per second (one thread, {size} images, {args.steps} steps each)")
     for name, value in rates.items():
         print(f"- {name}: {value:.1f} steps/s")

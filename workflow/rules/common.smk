@@ -236,7 +236,7 @@ def controller_conf(controller):
     drive = config["drive"]
     keys = ("threads", "vehicle", "expert", "network", "train", *(("path_noise",) if controller == "lp" else ()))
     if drive["dagger"]["rounds"] or drive["check"]["routes"]:
-        conf = drive_conf((*keys, "seed", "episode", "lane", "demonstrations", "dagger", "check"),
+        conf = drive_conf((*keys, "seed", "camera", "episode", "lane", "demonstrations", "dagger", "check"),
                           ("route", "image", "command", "repeat_conditions"))
         conf["drive"]["follow"] = {k: drive["follow"][k] for k in ("start_lateral_m", "start_yaw_deg")}
     else:

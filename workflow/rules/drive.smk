@@ -17,7 +17,7 @@ rule simulate_demonstrations:
             labels={"region": "{region}", "figure": "demonstrations"},
         ),
     params:
-        conf=drive_conf(("seed", "vehicle", "episode", "lane", "expert", "noise", "demonstrations"),
+        conf=drive_conf(("seed", "camera", "vehicle", "episode", "lane", "expert", "noise", "demonstrations"),
                         ("route", "image", "command")),
         code=code("topoloc.drive.simulate_demonstrations"),
     log:
@@ -97,7 +97,7 @@ rule follow_route:
             labels={"region": "{region}", "figure": "frame strip"},
         ),
     params:
-        conf=drive_conf(("seed", "threads", "vehicle", "episode", "lane", "expert", "demonstrations", "follow"),
+        conf=drive_conf(("seed", "threads", "camera", "vehicle", "episode", "lane", "expert", "demonstrations", "follow"),
                         ("route", "image", "command", "teach_condition", "repeat_conditions", "odometry_noise", "localize")),
         code=code("topoloc.drive.follow_route"),
     log:

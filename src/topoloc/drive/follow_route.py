@@ -38,7 +38,7 @@ from topoloc.drive.closed_loop import (
 from topoloc.drive.controller import AGENT_NAMES, load_controller
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.plot import frame_grid, paths_figure, success_figure
-from topoloc.drive.routes import evaluation_route, make_simulator
+from topoloc.drive.routes import evaluation_route, image_shape, make_simulator
 from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
@@ -76,9 +76,10 @@ def intersections(command: np.ndarray) -> int:
     return int(np.sum((command[1:] != 0) & (command[1:] != command[:-1])) + (len(command) > 0 and command[0] != 0))
 
 
-def place_localization(name: str, topo: TopometricMap, model: Any, localize: dict[str, Any]) -> PlaceLocalization:
-    """A new localization by the registered place localizer ``name``."""
-    return PlaceLocalization(cast(PlaceLocalizer, make(name, PLACE_OBSERVATIONS)), topo, model, localize)
+def place_localization(name: str, topo: TopometricMap, model: Any, localize: dict[str, Any],
+                       rows: int) -> PlaceLocalization:
+    """A new localization by the registered place localizer ``name`` (on the top ``rows`` of each image)."""
+    return PlaceLocalization(cast(PlaceLocalizer, make(name, PLACE_OBSERVATIONS)), topo, model, localize, rows)
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
@@ -96,8 +97,8 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     route = evaluation_route(graph, conf)
     topo = TopometricMap.load(inputs["map"])
     lane_s = vertex_lane_s(route, topo)
-    image = (int(place["image"]["height"]), int(place["image"]["width"]), 3 if place["image"]["color"] else 1)
-    controllers = {a: load_controller(inputs[f"controller_{a}"], image, cls=CONTROLLERS[a]) for a in follow["agents"] if a in CONTROLLERS}
+    controllers = {a: load_controller(inputs[f"controller_{a}"], image_shape(conf), "drive.camera.nearest_ground_m",
+                                      CONTROLLERS[a]) for a in follow["agents"] if a in CONTROLLERS}
     retrieval = load_model(inputs["model"]) if place_names else None
     sim = make_simulator(inputs.get("osm"), graph, route, conf)
     expert = Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
@@ -106,7 +107,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
               "replay": lambda: ReplayAgent(teach_steer, teach_speed, float(drive["expert"]["speed_gain"]))}
     locs = {"ground_truth": lambda: GroundTruth(lane_s)}
     for name in place_names:
-        locs[name] = partial(place_localization, name, topo, retrieval, place["localize"])
+        locs[name] = partial(place_localization, name, topo, retrieval, place["localize"], int(place["image"]["height"]))
     rows, traces, strips = [], {}, []
     runs = [(c, r, a, loc) for c in names["repeat"] for r in range(int(follow["repeats"]))
             for a in follow["agents"] for loc in localizations]

@@ -6,11 +6,14 @@
 * **Training routes** are random walks (:func:`topoloc.motion.route.random_route`, one-way roads respected,
   cut where they turn back at a dead end) seeded by ``drive.seed``, the route index and the attempt.
 * A route's **simulator** renders the scene around its lane (``render.buildings``, ``render.view_distance_m``)
-  with the camera of the place images (``place.image``).
+  with the controller's camera (:func:`drive_rig`): the place images' camera (``place.image``) with rows added below
+  until it sees the ground ``drive.camera.nearest_ground_m`` ahead. The place images' camera sees the road from
+  6.5 m on (at 160 x 48), farther than the expert's aim point (4-5 m); the localization reads the image's top rows.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -22,6 +25,7 @@ from topoloc.graph.road_graph import RoadGraph
 from topoloc.motion.route import random_route
 from topoloc.place.images import make_rig
 from topoloc.render.drives import drive_path
+from topoloc.render.rig import StereoRig
 from topoloc.render.scene import scene_for_path
 
 
@@ -74,10 +78,27 @@ def random_drive_route(graph: RoadGraph, conf: dict[str, Any], length_m: float, 
     return route.cut(length_m) if route.length_m > length_m else route
 
 
+def drive_rig(conf: dict[str, Any]) -> StereoRig:
+    """The controller's camera: the place images' (``place.image``) with as many rows added below as it takes for the
+    bottom row to see the ground ``drive.camera.nearest_ground_m`` ahead (none when that is null or already seen)."""
+    rig = make_rig(conf["place"]["image"], conf["render"])
+    near = conf["drive"]["camera"]["nearest_ground_m"]
+    if near is None:
+        return rig
+    rows = int(np.ceil(rig.cy + rig.camera_height * rig.f / float(near))) + 1  # row v sees the ground at h f / (v - cy)
+    return dataclasses.replace(rig, height=max(rig.height, rows))
+
+
+def image_shape(conf: dict[str, Any]) -> tuple[int, int, int]:
+    """(H, W, C) of the controller's images (:func:`drive_rig`, ``place.image.color``)."""
+    rig = drive_rig(conf)
+    return rig.height, rig.width, 3 if conf["place"]["image"]["color"] else 1
+
+
 def make_simulator(osm: str | None, graph: RoadGraph, route: DriveRoute, conf: dict[str, Any]) -> Simulator:
-    """The simulator of ``route``: its scene, the place images' camera, the ``drive`` vehicle and episode rules."""
+    """The simulator of ``route``: its scene, the controller's camera (:func:`drive_rig`), the ``drive`` vehicle and
+    episode rules."""
     render = conf["render"]
     scene = scene_for_path(osm, graph, route.xy, {**render["buildings"], "view_distance_m": float(render["view_distance_m"])},
                            int(render["seed"]))
-    rig = make_rig(conf["place"]["image"], render)
-    return Simulator(route, scene, rig, VehicleSpec.from_conf(conf["drive"]), float(render["view_distance_m"]))
+    return Simulator(route, scene, drive_rig(conf), VehicleSpec.from_conf(conf["drive"]), float(render["view_distance_m"]))

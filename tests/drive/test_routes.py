@@ -1,0 +1,77 @@
+"""The controller's camera: the place images' camera extended downwards, whose top rows the localization reads."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tests.conftest import make_config
+from tests.drive.conftest import drive_conf, route_scene, town_route
+from topoloc.drive.closed_loop import PlaceLocalization
+from topoloc.drive.routes import drive_rig, image_shape
+from topoloc.place.images import make_rig
+from topoloc.render.conditions import get_condition
+from topoloc.render.renderer import Renderer
+
+
+def ground_m(rig, row: int) -> float:
+    """How far ahead the centre of image row ``row`` sees the ground."""
+    return rig.camera_height * rig.f / (row - rig.cy)
+
+
+def test_the_camera_sees_the_ground_as_close_as_asked():
+    conf = make_config()
+    place = make_rig(conf["place"]["image"], conf["render"])
+    assert ground_m(place, place.height - 1) > 6.0  # the place camera alone misses the expert's aim point (4-5 m)
+    rig = drive_rig(conf)
+    near = conf["drive"]["camera"]["nearest_ground_m"]
+    assert ground_m(rig, rig.height - 1) <= near < ground_m(rig, rig.height - 2)
+    assert (rig.width, rig.f, rig.cx, rig.cy) == (place.width, place.f, place.cx, place.cy)
+    assert image_shape(conf) == (rig.height, 160, 3) and rig.height == 72
+    for far in (None, 30.0):  # the place camera alone, or one that already sees that far
+        assert drive_rig(make_config(drive={"camera": {"nearest_ground_m": far}})) == place
+
+
+def test_the_top_rows_are_the_place_image(town, town_graph):
+    conf = make_config()
+    route = town_route(town_graph, "straight", drive_conf())
+    scene = route_scene(town["osm"], town_graph, route)
+    place, rig = make_rig(conf["place"]["image"], conf["render"]), drive_rig(conf)
+    condition = get_condition("overcast")
+    noiseless = dataclasses.replace(condition, noise_std=0.0)
+    top = Renderer(scene, rig, noiseless, 0, 100.0).render(route.xy[100], float(route.yaw[100]))
+    alone = Renderer(scene, place, noiseless, 0, 100.0).render(route.xy[100], float(route.yaw[100]))
+    assert np.abs(top[: place.height].astype(int) - alone.astype(int)).max() <= 1
+    below = top[place.height:].astype(float)
+    assert below.std() > 5.0  # the road, not a blank band
+
+
+class _Recorder:
+    """A localizer and retrieval model that record the image shape they were given."""
+
+    name = "recorder"
+
+    def __init__(self) -> None:
+        self.shapes: list[tuple[int, ...]] = []
+        self.hparams = type("H", (), {"embedding_dim": 4})()
+
+    def reset(self, topo, conf) -> None:
+        pass
+
+    def embed(self, images):
+        self.shapes.append(images.shape[1:])
+        return np.zeros((len(images), 4), np.float32)
+
+    def update(self, frame):
+        return type("A", (), {"state": 0, "confidence": 1.0})()
+
+
+def test_the_localization_reads_the_place_images_rows():
+    recorder = _Recorder()
+    topo = type("T", (), {"embedding": np.zeros((3, 4), np.float32)})()
+    loc = PlaceLocalization(recorder, topo, recorder, {}, rows=48)
+    loc.start(np.random.default_rng(0))
+    loc.update(np.zeros((72, 160, 3), np.uint8), 1.0, None)
+    assert recorder.shapes == [(48, 160, 3)]
