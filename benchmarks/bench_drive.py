@@ -2,15 +2,15 @@
 
 Usage (after ``snakemake all`` built ``results/<region>/drive/follow``)::
 
-    PYTHONPATH=src python benchmarks/bench_drive.py [--config config/config.yaml] [--steps 300]
+    PYTHONPATH=src python benchmarks/bench_drive.py [--config config/config.yaml] [--steps 300] [--controller CKPT]
 
 1. **Speed**: on the evaluation route, one torch thread, the closed loop of Topo-DLM with the configured
    place localizer (render the camera image, embed it and localize on the topometric map, run the controller,
    step the vehicle), then its parts alone: rendering, rendering plus the controller, rendering plus the
    localization. Target: at least 20 closed-loop steps per second at the controller's image size.
 2. **Success rates**: the ``follow_route`` summary per agent and condition, checked against the issue's
-   targets (Topo-DLM with retrieval localization: mean success >= 0.8 and every condition >= 0.6, ahead of
-   replay).
+   targets (Topo-DLM and Topo-LP with retrieval localization: mean success >= 0.8 and every condition >= 0.6,
+   ahead of replay).
 """
 
 from __future__ import annotations
@@ -38,8 +38,8 @@ from topoloc.registry import make
 TARGET_STEPS_PER_S = 20.0
 
 
-def speed(conf: dict, root: Path, steps: int, localizer: str) -> dict[str, float]:
-    """Steps per second of the closed loop and of its parts (one thread)."""
+def speed(conf: dict, root: Path, steps: int, localizer: str, controller: Path) -> dict[str, float]:
+    """Steps per second of the closed loop of the Topo-DLM ``controller`` and of its parts (one thread)."""
     torch.set_num_threads(1)
     graph = RoadGraph.load(root / "graph" / "graph.graphml")
     route = evaluation_route(graph, conf)
@@ -48,7 +48,7 @@ def speed(conf: dict, root: Path, steps: int, localizer: str) -> dict[str, float
     topo = TopometricMap.load(root / "topometric_map" / "map.npz")
     lane_s = vertex_lane_s(route, topo)
     place = conf["place"]
-    agent = DLMAgent(load_controller(root / "drive" / "dlm" / "controller.ckpt", image_shape(conf)), topo)
+    agent = DLMAgent(load_controller(controller, image_shape(conf)), topo)
     retrieval = load_model(root / "retrieval" / "model.ckpt")
     condition = place["repeat_conditions"][0]
     out = {}
@@ -82,11 +82,12 @@ def main() -> None:
     parser.add_argument("--config", default="config/config.yaml")
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--localizer", default="place_loop")
+    parser.add_argument("--controller", type=Path, help="a Topo-DLM checkpoint (default: the region's own)")
     args = parser.parse_args()
     config = load(Path(args.config))
     conf = {"drive": config["drive"], "place": config["place"], "render": config["render"]}
     root = Path("results") / config["region"]["name"]
-    rates = speed(conf, root, args.steps, args.localizer)
+    rates = speed(conf, root, args.steps, args.localizer, args.controller or root / "drive" / "dlm" / "controller.ckpt")
     height, width, _ = image_shape(conf)
     size = f"{width}x{height}"
     print(f"## Closed-loop steps per second (one thread, {size} images, {args.steps} steps each)")
@@ -102,8 +103,8 @@ def main() -> None:
         table.insert(0, "Mean", table.mean(axis=1))
         print("\n## Success rate per condition (follow_route)\n")
         print(table.to_markdown(floatfmt=".2f"))
-        dlm = [a for a in table.index if a.startswith("Topo-DLM") and "ground truth" not in a]
-        for agent in dlm:
+        learned = [a for a in table.index if a.startswith("Topo-") and "ground truth" not in a]
+        for agent in learned:
             ok = table.loc[agent, "Mean"] >= 0.8 and table.loc[agent].drop("Mean").min() >= 0.6
             print(f"{agent}: target mean >= 0.8 and every condition >= 0.6: {'met' if ok else 'MISSED'}")
         result["success"] = {a: table.loc[a].to_dict() for a in table.index}

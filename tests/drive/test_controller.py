@@ -93,7 +93,7 @@ def test_a_waypoint_controller_learns_the_lane_points(straight, straight_demos, 
     """Open loop only: at this budget (90 steps) the waypoint controller's lane points carry a bias of about 0.1 m,
     a steady 0.02-0.06 steer to the left in closed loop that leaves this road (README, route following)."""
     drive, _ = straight
-    conf = drive | {"network": {**drive["network"], "output": "waypoints"}}
+    conf = drive | {"network": {**drive["network"], "output": {"dlm": "waypoints", "lp": "steer"}}}
     model, _history, metrics = fit(conf, straight_demos, str(tmp_path / "wp.ckpt"))
     assert model.n_outputs == 2 * len(WAYPOINT_ARCS) + 1
     assert metrics["best/val/steer_mae"] < 0.1

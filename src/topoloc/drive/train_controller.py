@@ -132,7 +132,7 @@ def build_model(drive: dict[str, Any], demos: Demonstrations, agent: str = "dlm"
                    speed_gain=float(drive["expert"]["speed_gain"]), lr=float(train["lr"]),
                    weight_decay=float(train["weight_decay"]), steer_weight=float(train["steer_weight"]),
                    speed_weight=float(train["speed_weight"]), augment=bool(train["augment"]), seed=int(train["seed"]),
-                   output=str(net["output"]), wheelbase=float(drive["vehicle"]["wheelbase_m"]),
+                   output=str(net["output"][agent]), wheelbase=float(drive["vehicle"]["wheelbase_m"]),
                    max_steer_deg=float(drive["vehicle"]["max_steer_deg"]), lookahead_s=float(drive["expert"]["lookahead_s"]),
                    min_lookahead_m=float(drive["expert"]["min_lookahead_m"]))
 
