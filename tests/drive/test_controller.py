@@ -15,7 +15,7 @@ from topoloc.drive.lanes import build_route, plan_route
 from topoloc.drive.local_path import map_path, raster
 from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, VehicleSpec
 from topoloc.drive.topo_lp import TopoLP
-from topoloc.drive.train_controller import fit, signature_example
+from topoloc.drive.train_controller import build_model, fit, signature_example
 from topoloc.errors import InputError
 from topoloc.render.rig import StereoRig
 
@@ -100,6 +100,13 @@ def test_a_waypoint_controller_learns_the_lane_points(straight, straight_demos, 
     assert model(torch_inputs(straight_demos)).shape == (2, 2)
     loaded = load_controller(tmp_path / "wp.ckpt", (48, 64, 3))
     assert loaded.hparams.output == "waypoints"
+
+
+def test_each_controller_gets_its_own_output(straight, straight_demos):
+    drive, _ = straight
+    conf = drive | {"network": {**drive["network"], "output": {"dlm": "steer", "lp": "waypoints"}}}
+    assert build_model(conf, straight_demos, "dlm").n_outputs == 2
+    assert build_model(conf, straight_demos, "lp").n_outputs == 2 * len(WAYPOINT_ARCS) + 1
 
 
 def test_topo_lp_learns_the_same_road_from_its_local_path(straight, straight_demos, tmp_path):
