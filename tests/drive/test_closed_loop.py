@@ -12,12 +12,13 @@ from topoloc.drive.closed_loop import (
     GroundTruth,
     ReplayAgent,
     run_episode,
+    speed_limit_ahead,
     teach_controls,
     vertex_lane_s,
 )
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.follow_route import intersections
-from topoloc.drive.simulator import Simulator, VehicleSpec
+from topoloc.drive.simulator import Control, Simulator, VehicleSpec
 from topoloc.errors import InputError
 from topoloc.place.topometric_map import TopometricMap
 from topoloc.render.rig import StereoRig
@@ -59,6 +60,42 @@ def test_replay_with_ground_truth_follows_the_teach_drive(town, town_graph):
     short = route.cut(60.0)
     lane_s = vertex_lane_s(short, looped)
     assert np.allclose(lane_s[:55], np.arange(55), atol=0.2) and np.all(lane_s[80:] == short.length_m)
+
+
+class FullThrottle(ReplayAgent):
+    """The teach drive's steering at full throttle: an agent that never slows for a turn."""
+
+    def act(self, image, speed, vertex):
+        return Control(float(self.steer[vertex]), 1.0)
+
+
+def test_speed_limit_ahead_is_the_slowest_teach_speed_in_reach():
+    speed, lane_s = np.array([6.0, 6.0, 6.0, 3.0, 6.0]), np.array([0.0, 5.0, 10.0, 15.0, 20.0])
+    assert speed_limit_ahead(speed, lane_s, 10.0).tolist() == [6.0, 3.0, 3.0, 3.0, 6.0]
+    assert speed_limit_ahead(speed, lane_s, 0.0).tolist() == speed.tolist()
+
+
+def test_the_map_speed_limit_holds_an_agent_that_never_slows_to_the_teach_speed(town, town_graph):
+    drive = drive_conf(follow={"start_lateral_m": 0.0, "start_yaw_deg": 0.0})
+    conf = {"drive": drive, "place": make_config()["place"]}
+    route = town_route(town_graph, "right", drive).cut(175.0)
+    sim = Simulator(route, route_scene(town["osm"], town_graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
+                    VehicleSpec.from_conf(drive), 100.0)
+    topo = lane_map(route)
+    lane_s = vertex_lane_s(route, topo)
+    steer, speed = teach_controls(sim, Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"])),
+                                  "clear_noon", 0, lane_s)
+    limit = speed_limit_ahead(speed, lane_s, 10.0)
+    reckless = FullThrottle(steer, speed, 0.5)
+    hz, excess = sim.spec.control_hz, []
+    for speed_limit in (None, limit):
+        episode = run_episode(sim, reckless, GroundTruth(lane_s), topo, "clear_noon", 1, conf, speed_limit=speed_limit)
+        assert episode.outcome == "success"
+        v = np.hypot(*np.diff(episode.xy, axis=0).T) * hz  # speed per step from the driven path
+        at = np.searchsorted(lane_s, np.concatenate([[0.0], np.cumsum(v[:-1] / hz)])).clip(0, len(lane_s) - 1)
+        excess.append(float((v - limit[at]).max()))
+    assert limit.min() < 4.0  # the teach drive slowed for the right turn
+    assert excess[0] > 5.0 and excess[1] < 1.5  # at most the throttle's lag over the limit
 
 
 def test_intersections_count_each_stretch_of_a_turn_command():

@@ -8,6 +8,10 @@ by a localization on the topometric map.
   true distance with the noise model of ``place.odometry_noise``: a scale error per drive and white noise).
   It is *unsure* when no answer of the last ``lost_steps`` steps had a confidence of at least
   ``place.localize.threshold``; the agents then slow down to ``slow_mps`` (as the paper does while relocalizing).
+* **Speed limit from the map**: the map's vertices keep the teach drive's target speed (the replay agent drives by
+  it); with ``teach_speed_ahead_m`` every agent stays under the lowest of them from its localized vertex to that far
+  ahead (:func:`speed_limit_ahead`). The controllers predict their target speed from the image, and at 6 m/s a 5 m
+  radius junction turn is taken too fast; the map knows the teach drive slowed there.
 * **Agents**: :class:`DLMAgent` (Topo-DLM: the image, the speed and the vertex's command), :class:`LPAgent`
   (Topo-LP: the image, the speed and the local path of the map from the vertex) and
   :class:`ReplayAgent` (the paper's baseline: the steering the expert used at that vertex in the teach drive,
@@ -169,6 +173,12 @@ class ReplayAgent:
         return Control(float(self.steer[vertex]), float(np.clip(self.gain * (self.speed[vertex] - speed), -1, 1)))
 
 
+def speed_limit_ahead(speed: NDArray[np.float64], lane_s: NDArray[np.float64], ahead_m: float) -> NDArray[np.float64]:
+    """Per vertex, the lowest ``speed`` of the vertices from it to ``ahead_m`` further along the lane (``lane_s``, sorted)."""
+    end = np.searchsorted(lane_s, lane_s + ahead_m, side="right")
+    return np.array([speed[k:max(k + 1, e)].min() for k, e in enumerate(end)], float)
+
+
 def teach_controls(sim: Simulator, expert: Expert, condition: str, seed: int,
                    lane_s: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The expert's teach drive (no noise, no images needed): its steering and target speed at every map vertex."""
@@ -201,8 +211,9 @@ class Episode:
 
 
 def run_episode(sim: Simulator, agent: Any, localization: Any, topo: TopometricMap, condition: str, seed: int,
-                conf: dict[str, Any], strip_frames: int = 0) -> Episode:
-    """Drive one repeat of ``sim``'s route under ``condition`` (``conf``: the ``drive`` and ``place`` slices)."""
+                conf: dict[str, Any], strip_frames: int = 0, speed_limit: NDArray[np.float64] | None = None) -> Episode:
+    """Drive one repeat of ``sim``'s route under ``condition`` (``conf``: the ``drive`` and ``place`` slices;
+    ``speed_limit``: m/s per map vertex, :func:`speed_limit_ahead`)."""
     drive, place = conf["drive"], conf["place"]
     follow, noise = drive["follow"], place["odometry_noise"]
     rng = np.random.default_rng([seed, 53])
@@ -229,9 +240,12 @@ def run_episode(sim: Simulator, agent: Any, localization: Any, topo: TopometricM
         errors.append(float(np.hypot(*(topo.gt_xy[vertex] - here))))
         since_sure = 0 if confidence >= threshold else since_sure + 1
         control = agent.act(image, obs.speed, vertex)
+        limit = float(speed_limit[vertex]) if speed_limit is not None else np.inf
         if since_sure >= lost:
             slow_steps += 1
-            control = Control(control.steer, min(control.throttle, gain * (slow - obs.speed)))
+            limit = min(limit, slow)
+        if limit < np.inf:
+            control = Control(control.steer, min(control.throttle, gain * (limit - obs.speed)))
         if every and sim.t % every == 0 and len(frames) < strip_frames:
             frames.append((obs.image, (f"t={sim.t / sim.spec.control_hz:.0f}s {COMMANDS[int(topo.command[vertex])]} "
                                       f"{control.steer:+.2f}")))

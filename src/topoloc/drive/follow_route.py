@@ -5,8 +5,8 @@ The evaluation route is the teach route of the topometric map (``place.route``),
 ``drive.follow.repeats`` seeds, every agent of ``drive.follow.agents`` (``dlm``: Topo-DLM; ``lp``: Topo-LP; ``replay``: the teach
 drive's steering per vertex, recorded from the expert's teach drive) drives it with every localization of
 ``drive.follow.localization`` (``ground_truth`` or a place localizer of the registry, with the retrieval
-network's scores; :mod:`topoloc.drive.closed_loop`). The same seed gives every agent the same start offset
-and odometry noise.
+network's scores; :mod:`topoloc.drive.closed_loop`), under the teach drive's speed ahead on the map
+(``drive.follow.teach_speed_ahead_m``). The same seed gives every agent the same start offset and odometry noise.
 
 Outputs: ``episodes`` (one row per drive: outcome, progress, localization error, speed of the loop),
 ``summary`` (success rate per condition and agent), ``table`` (like the paper's Tables 1 and 2: success rate
@@ -32,6 +32,7 @@ from topoloc.drive.closed_loop import (
     PlaceLocalization,
     ReplayAgent,
     run_episode,
+    speed_limit_ahead,
     teach_controls,
     vertex_lane_s,
 )
@@ -103,6 +104,8 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     sim = make_simulator(inputs.get("osm"), graph, route, conf)
     expert = Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
     teach_steer, teach_speed = teach_controls(sim, expert, place["teach_condition"], int(drive["seed"]), lane_s)
+    ahead = follow["teach_speed_ahead_m"]
+    limit = None if ahead is None else speed_limit_ahead(teach_speed, lane_s, float(ahead))
     agents = {"dlm": lambda: DLMAgent(controllers["dlm"], topo), "lp": lambda: LPAgent(controllers["lp"], topo),
               "replay": lambda: ReplayAgent(teach_steer, teach_speed, float(drive["expert"]["speed_gain"]))}
     locs = {"ground_truth": lambda: GroundTruth(lane_s)}
@@ -117,7 +120,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         seed = int(np.random.SeedSequence([int(drive["seed"]), 59, names["repeat"].index(condition), repeat]).generate_state(1)[0])
         want_strip = repeat == 0 and (agent, loc) == strip_method
         episode = run_episode(sim, agents[agent](), locs[loc](), topo, condition, seed, conf,
-                              int(follow["strip_frames"]) if want_strip else 0)
+                              int(follow["strip_frames"]) if want_strip else 0, limit)
         key = f"{condition}/{repeat}/{agent}/{loc}"
         traces[key] = episode.xy
         if want_strip:
@@ -144,7 +147,9 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     parts = [(f"# Route following in closed loop (teach: {place['teach_condition']}; controller trained under "
              f"{', '.join(trained)}; held out: {', '.join(held_out) or 'none'})"), "",
              (f"{int(follow['repeats'])} repeat drive(s) per condition and agent over the first {route.length_m:.0f} m "
-             f"of the teach route; {steps_per_s:.1f} closed-loop steps/s on this machine (render, controller, localization)."), ""]
+             f"of the teach route; {steps_per_s:.1f} closed-loop steps/s on this machine (render, controller, localization). "
+             + ("No speed limit from the map." if ahead is None else
+                f"Every agent keeps under the teach drive's speed over the next {float(ahead):g} m of the map.")), ""]
     for title, column, fmt in (("Success rate", "success_rate", "{:.2f}"),
                                ("Share of the route driven", "progress_share", "{:.2f}"),
                                ("Mean localization error (m)", "mean_loc_error_m", "{:.1f}")):
