@@ -11,6 +11,8 @@ from tests.drive.conftest import drive_conf, route_scene, town_route
 from topoloc.drive.closed_loop import (
     GroundTruth,
     ReplayAgent,
+    repeat_routes,
+    route_starts,
     run_episode,
     speed_limit_ahead,
     teach_controls,
@@ -96,6 +98,34 @@ def test_the_map_speed_limit_holds_an_agent_that_never_slows_to_the_teach_speed(
         excess.append(float((v - limit[at]).max()))
     assert limit.min() < 4.0  # the teach drive slowed for the right turn
     assert excess[0] > 5.0 and excess[1] < 1.5  # at most the throttle's lag over the limit
+
+
+def test_repeat_routes_split_the_teach_route_each_with_the_map_of_its_stretch(town, town_graph):
+    drive = drive_conf(follow={"start_lateral_m": 0.0, "start_yaw_deg": 0.0})
+    conf = {"drive": drive, "place": make_config()["place"]}
+    teach = town_route(town_graph, "right", drive).cut(175.0)
+    topo = lane_map(teach)
+    parts = repeat_routes(teach, topo, 60.0, 3)
+    assert [p.start_m for p in parts] == pytest.approx([0.0, (teach.length_m - 60.0) / 2, teach.length_m - 60.0])
+    for part in parts:
+        route = part.route
+        assert route.s[0] == 0.0 and route.length_m == pytest.approx(60.0, abs=0.3)
+        assert np.allclose(route.xy[0], teach.point(part.start_m), atol=0.3)
+        assert np.allclose(part.topo.gt_xy[0], route.xy[0], atol=1.0)  # the map starts where the route does
+        assert part.lane_s[0] < 1.0 and part.lane_s[-1] <= route.length_m + 0.5 and len(part.topo) == len(part.lane_s)
+        assert np.allclose(part.lane_s, vertex_lane_s(route, part.topo), atol=0.3)
+    assert set(parts[0].route.command.tolist()) == {0} and 2 in parts[2].route.command  # the right turn is on the last
+    last = parts[2]
+    sim = Simulator(last.route, route_scene(town["osm"], town_graph, last.route), StereoRig.kitti(64, 48, 0.54, 1.65),
+                    VehicleSpec.from_conf(drive), 100.0)
+    expert = Expert(last.route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
+    steer, speed = teach_controls(sim, expert, "clear_noon", 0, last.lane_s)
+    episode = run_episode(sim, ReplayAgent(steer, speed, 0.5), GroundTruth(last.lane_s), last.topo, "rain", 2, conf)
+    assert episode.outcome == "success" and np.median(episode.loc_error_m) < 1.0
+    assert route_starts(175.0, None, 1) == [0.0] and route_starts(175.0, 60.0, 1) == [0.0]
+    for length in (None, 175.0, 200.0):  # several routes that would all be the whole teach route
+        with pytest.raises(InputError, match="drive.follow.routes"):
+            route_starts(175.0, length, 2)
 
 
 def test_intersections_count_each_stretch_of_a_turn_command():

@@ -62,6 +62,45 @@ def vertex_lane_s(route: DriveRoute, topo: TopometricMap) -> NDArray[np.float64]
     return np.maximum.accumulate(out)
 
 
+@dataclass
+class RepeatRoute:
+    """One evaluation route: the lane from ``start_m`` of the teach route, the map of its own stretch of the teach
+    drive (its first vertex at the start) and each vertex's arc length along the lane."""
+
+    start_m: float
+    route: DriveRoute
+    topo: TopometricMap
+    lane_s: NDArray[np.float64]
+
+
+def route_starts(teach_m: float, length_m: float | None, routes: int) -> list[float]:
+    """Where ``routes`` evaluation routes of ``length_m`` (None: the whole teach route) start on a teach route of
+    ``teach_m``: evenly from its start to ``length_m`` before its end. InputError naming ``drive.follow.routes`` when
+    several routes would all be the same."""
+    if routes < 1:
+        raise InputError("drive.follow.routes", f"must be at least 1, got {routes}")
+    room = teach_m - (teach_m if length_m is None else min(float(length_m), teach_m))
+    if routes > 1 and room < 1.0:
+        raise InputError("drive.follow.routes", f"{routes} routes need drive.follow.length_m shorter than the "
+                         f"{teach_m:.0f} m teach route (it is {length_m})")
+    return [float(v) for v in np.linspace(0.0, room, routes)]
+
+
+def repeat_routes(teach: DriveRoute, topo: TopometricMap, length_m: float | None, routes: int) -> list[RepeatRoute]:
+    """The evaluation routes of ``drive.follow`` (:func:`route_starts`) on the teach route ``teach`` and its map."""
+    lane_s = vertex_lane_s(teach, topo)
+    out = []
+    for start in route_starts(teach.length_m, length_m, routes):
+        route = teach.part(start, teach.length_m - start if length_m is None else float(length_m))
+        lo = int(np.searchsorted(lane_s, start, side="left"))
+        hi = int(np.searchsorted(lane_s, start + route.length_m, side="right"))
+        if hi - lo < 2:
+            raise InputError("map", f"the topometric map has no vertices on the teach route from {start:.0f} m "
+                             f"to {start + route.length_m:.0f} m")
+        out.append(RepeatRoute(start, route, topo.part(lo, hi), lane_s[lo:hi] - start))
+    return out
+
+
 class OnlineScorer(Scorer):
     """Retrieval scores of the images seen so far (embedded one per step) against the map's vertices."""
 

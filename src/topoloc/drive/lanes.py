@@ -187,14 +187,21 @@ class DriveRoute:
 
     def cut(self, length_m: float) -> DriveRoute:
         """The first ``length_m`` metres of the lane (the rasters are kept)."""
-        n = int(np.searchsorted(self.s, length_m, side="right"))
-        if n < 2:
-            raise InputError("drive.follow.length_m", f"{length_m} m leaves no lane to drive")
-        used = set(self.edge[:n].tolist())
+        return self.part(0.0, length_m)
+
+    def part(self, start_m: float, length_m: float, where: str = "drive.follow.length_m") -> DriveRoute:
+        """The lane from arc length ``start_m`` on for ``length_m`` metres, its arc length counted from there (the rasters
+        are kept); InputError naming ``where`` when that leaves no lane to drive."""
+        lo = int(np.searchsorted(self.s, start_m, side="left"))
+        hi = int(np.searchsorted(self.s, start_m + length_m, side="right"))
+        if hi - lo < 2:
+            raise InputError(where, f"{length_m} m from {start_m:.0f} m leaves no lane to drive (the lane is "
+                             f"{self.length_m:.0f} m long)")
+        used = set(self.edge[lo:hi].tolist())
         keep = [i for i, e in enumerate(self.edges) if e in used]
-        return DriveRoute([self.edges[i] for i in keep], [self.froms[i] for i in keep], self.xy[:n], self.yaw[:n],
-                          self.s[:n], self.edge[:n], self.width[:n], self.command[:n], self.drivable, self.corridor,
-                          self.origin)
+        return DriveRoute([self.edges[i] for i in keep], [self.froms[i] for i in keep], self.xy[lo:hi], self.yaw[lo:hi],
+                          self.s[lo:hi] - self.s[lo], self.edge[lo:hi], self.width[lo:hi], self.command[lo:hi],
+                          self.drivable, self.corridor, self.origin)
 
 
 def lane_polyline(centre: NDArray[np.float64], offset: NDArray[np.float64], smoothing_m: float) -> NDArray[np.float64]:

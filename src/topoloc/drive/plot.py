@@ -96,17 +96,25 @@ def training_figure(history: pd.DataFrame, path: str | Path, name: str = "Topo-D
     _save(fig, path)
 
 
-def paths_figure(graph: RoadGraph, lane: NDArray[np.float64], episodes: pd.DataFrame, traces: dict[str, NDArray[np.float64]],
-                 path: str | Path) -> None:
-    """The driven paths of every episode over the road map and the route, one panel per agent, coloured by outcome."""
+def paths_figure(graph: RoadGraph, lanes: list[NDArray[np.float64]], episodes: pd.DataFrame,
+                 traces: dict[str, NDArray[np.float64]], path: str | Path) -> None:
+    """The driven paths of every episode over the road map and the routes' lanes (start: a dot), one panel per agent
+    (three to a row), coloured by outcome."""
     agents = list(dict.fromkeys(episodes.agent))
-    fig, axes = plt.subplots(1, len(agents), figsize=(5.5 * len(agents), 5.5), squeeze=False)
-    lo, hi = lane.min(axis=0) - 40, lane.max(axis=0) + 40
-    for ax, agent in zip(axes[0], agents):
-        for coords in graph.geometry:
-            if np.any(np.all((coords >= lo) & (coords <= hi), axis=1)):
-                ax.plot(coords[:, 0], coords[:, 1], color="0.85", lw=3, zorder=1)
-        ax.plot(lane[:, 0], lane[:, 1], "k--", lw=0.8, label="route (lane)", zorder=2)
+    cols = min(3, len(agents))
+    rows = -(-len(agents) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(5.5 * cols, 5.5 * rows), squeeze=False)
+    every = np.vstack(lanes)
+    lo, hi = every.min(axis=0) - 40, every.max(axis=0) + 40
+    roads = [c for c in graph.geometry if np.any(np.all((c >= lo) & (c <= hi), axis=1))]
+    for ax in axes.flat[len(agents):]:
+        ax.axis("off")
+    for ax, agent in zip(axes.flat, agents):
+        for coords in roads:
+            ax.plot(coords[:, 0], coords[:, 1], color="0.85", lw=3, zorder=1)
+        for k, lane in enumerate(lanes):
+            ax.plot(lane[:, 0], lane[:, 1], "k--", lw=0.8, label="route (lane)" if k == 0 else None, zorder=2)
+            ax.plot(*lane[0], "ko", ms=5)
         for row in episodes[episodes.agent == agent].itertuples():
             xy = traces[row.episode]
             ax.plot(xy[:, 0], xy[:, 1], color=OUTCOME_COLORS.get(row.outcome, "k"), lw=0.9, alpha=0.8, zorder=3)
@@ -114,7 +122,6 @@ def paths_figure(graph: RoadGraph, lane: NDArray[np.float64], episodes: pd.DataF
                 ax.plot(*xy[-1], "x", color=OUTCOME_COLORS.get(row.outcome, "k"), ms=6, zorder=4)
         for outcome, color in OUTCOME_COLORS.items():
             ax.plot([], [], color=color, label=outcome)
-        ax.plot(*lane[0], "ko", ms=5)
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_aspect("equal")

@@ -58,6 +58,11 @@ class TopometricMap:
     def __len__(self) -> int:
         return len(self.xy)
 
+    def part(self, lo: int, hi: int) -> TopometricMap:
+        """The map of vertices ``lo`` to ``hi - 1`` (a teach drive of that stretch alone)."""
+        return TopometricMap(self.embedding[lo:hi], self.descriptor[lo:hi], self.xy[lo:hi], self.command[lo:hi],
+                             self.gt_xy[lo:hi], self.condition)
+
     def save(self, path: str | Path) -> None:
         """Write as ``.npz``, atomically."""
         with atomic_path(path) as tmp:
