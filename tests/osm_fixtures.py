@@ -25,12 +25,12 @@ NODES = {
     21: (3.1 + D, 0.1),
 }
 WAYS = [
-    (100, [2, 3, 1, 4, 5], {"highway": "residential", "name": "West-East"}),
-    (101, [6, 1, 7], {"highway": "residential", "name": "South-North"}),
-    (102, [6, 1], {"highway": "tertiary"}),  # mapped over the same stretch as way 101: one road
+    (100, [2, 3, 1, 4, 5], {"highway": "residential", "name": "West-East", "lanes": "2"}),
+    (101, [6, 1, 7], {"highway": "residential", "name": "South-North", "width": "8,5 m"}),
+    (102, [6, 1], {"highway": "tertiary", "lanes": "2;3"}),  # mapped over the same stretch as way 101: one road
     (103, [5, 8], {"highway": "footway"}),
-    (104, [10, 9, 5], {"highway": "service", "oneway": "yes"}),  # runs against the canonical direction
-    (105, [10, 11], {"highway": "residential", "access": "private"}),
+    (104, [10, 9, 5], {"highway": "service", "oneway": "yes", "width": "12'"}),  # against the canonical direction
+    (105, [10, 11], {"highway": "residential", "access": "private", "lanes": "1"}),
     (106, [20, 21], {"highway": "residential"}),
     (107, [7, 30, 99], {"highway": "residential"}),  # node 99 lies outside the extract
     (108, [2, 6, 30, 2], {"highway": "residential", "area": "yes"}),

@@ -32,7 +32,8 @@ from topoloc.errors import InputError
 from topoloc.graph.build_graph import build_road_graph
 from topoloc.render.conditions import CONDITIONS
 from topoloc.render.rig import StereoRig
-from topoloc.render.textures import has_centre_line, road_width
+from topoloc.render.scene import graph_roads
+from topoloc.render.textures import carriageway_width, has_centre_line, road_width
 
 RIG = StereoRig.kitti(64, 48, 0.54, 1.65)
 
@@ -178,3 +179,22 @@ def test_the_lane_keeps_right_of_a_drawn_centre_line_and_to_the_middle_of_other_
     centre_y = float(np.mean(graph.geometry[edges[0]][:, 1]))
     assert has_centre_line(road_width(highway), oneway == "no") == (right_of_centre_m > 0)
     assert centre_y - float(np.median(route.xy[:, 1])) == pytest.approx(right_of_centre_m, abs=0.05)  # east: right is south
+
+
+@pytest.mark.parametrize(("tags", "width_m"), [({}, 7.0), ({"lanes": "4"}, 13.0), ({"lanes": "1"}, 4.0),
+                                               ({"lanes": "4", "width": "9.5"}, 9.5), ({"width": "60"}, 7.0)])
+def test_carriageways_are_as_wide_as_the_map_tags_them(tmp_path, tags, width_m):
+    """The ``width`` tag, else ``lanes`` x 3.25 m (at least 4 m), else the class default: for the lane, the drivable area
+    and the renderer alike (a 60 m ``width`` is not a carriageway)."""
+    osm = write_osm(tmp_path / "road.osm", {1: lonlat(0.0, 0.0), 2: lonlat(200.0, 0.0)},
+                    [(10, [1, 2], {"highway": "residential", **tags})])
+    graph, _ = build_road_graph(str(osm), ["residential"], 20.0)
+    assert carriageway_width("residential", float(graph.edges.lanes[0]), float(graph.edges.width_m[0])) == width_m
+    assert [road.width for road in graph_roads(graph)] == [width_m]
+    edges, froms = plan_route(graph, node_at(graph, 0.0, 0.0), node_at(graph, 200.0, 0.0))
+    route = build_route(graph, edges, froms, margin_m=0.5)
+    assert np.allclose(route.width, width_m)
+    centre = graph.geometry[edges[0]].mean(axis=0)
+    assert route.on_drivable(centre + [0.0, width_m / 2 + 0.25]) and not route.on_drivable(centre + [0.0, width_m / 2 + 1.0])
+    offset = float(centre[1] - np.median(route.xy[:, 1]))  # two-way: a quarter of the carriageway right where marked
+    assert offset == pytest.approx(width_m / 4 if has_centre_line(width_m, True) else 0.0, abs=0.05)

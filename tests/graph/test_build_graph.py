@@ -35,6 +35,9 @@ def test_edges_have_stable_ids_geometry_length_and_direction(cross):
     # The overlapping ways 101 and 102 make one road; both ids are kept.
     assert graph.edges.osm_way_ids[2] == "101"
     assert graph.edges.osm_way_ids[3] == "101;107"
+    # lanes / width tags: per road, the value of most of its tagged segments (way 107 is untagged)
+    assert graph.edges.lanes.fillna(0).tolist() == [2, 2, 0, 0, 0, 1]
+    assert graph.edges.width_m.fillna(0).tolist() == [0, 0, 8.5, 8.5, 0, 0]
     assert np.allclose(graph.geometry[3][0], graph.nodes.loc[1, ["x", "y"]].to_numpy(float))
 
 

@@ -1,4 +1,5 @@
 import bz2
+import math
 
 import pytest
 
@@ -16,6 +17,9 @@ def test_reads_drivable_ways_with_locations(tmp_path):
     assert network.missing_node_refs == 1
     assert network.lonlat[1] == pytest.approx((3.0, 0.0))
     assert network.highway_counts() == {"residential": 5, "service": 1, "tertiary": 1}
+    # lanes and width tags: numbers and metres read, lists and other units not
+    assert by_id[100].lanes == 2.0 and by_id[101].width_m == 8.5 and by_id[105].lanes == 1.0
+    assert math.isnan(by_id[102].lanes) and math.isnan(by_id[104].width_m) and math.isnan(by_id[106].lanes)
 
 
 def test_private_roads_are_dropped_on_request(tmp_path):

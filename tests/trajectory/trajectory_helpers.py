@@ -18,7 +18,7 @@ def make_graph(coords: dict[int, tuple[float, float]], edges: list[tuple], spaci
         pts = np.array([coords[u], coords[v]], dtype=float)
         length = float(np.hypot(*(pts[1] - pts[0])))
         geometry.append(pts)
-        records.append((u, v, length, "residential", "", oneway, "1", 0))
+        records.append((u, v, length, "residential", "", oneway, "1", 0, np.nan, np.nan))
     frame = pd.DataFrame(records, columns=EDGE_COLUMNS)
     frame.index.name = "edge_id"
     degree = pd.Series(0, index=nodes.index)

@@ -9,8 +9,8 @@ there from the middle), then smoothed with a Gaussian of ``smoothing_m`` (corner
 :data:`DENSE_M`; bends still tighter than ``min_radius_m`` (the lane offset on the inside of a junction corner
 can leave a radius of 1 m, which no car can follow) are widened by smoothing them further, locally
 (:func:`widen_bends`), so the vehicle can follow every lane it is given. The carriageway width is the
-per-class default of the renderer (:func:`topoloc.render.textures.road_width`: what the images show; the
-graph keeps no ``lanes`` / ``width`` tags). Each lane sample carries its road edge and the **navigation command** of Cai & Wan
+renderer's (:func:`topoloc.render.textures.carriageway_width`: what the images show): the road's OSM ``width`` tag,
+else its ``lanes`` tag times a lane width, else a per-class default. Each lane sample carries its road edge and the **navigation command** of Cai & Wan
 (``follow``, or ``left`` / ``right`` / ``straight`` within ``command_m`` before an intersection), from
 :func:`topoloc.place.topometric_map.route_intersections`, the rule that labels the topometric map's vertices.
 
@@ -34,7 +34,7 @@ from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.motion.route import sample_route
 from topoloc.place.topometric_map import COMMANDS, route_intersections, vertex_commands
-from topoloc.render.textures import has_centre_line, road_width
+from topoloc.render.textures import edge_widths, has_centre_line
 
 DENSE_M = 0.25
 CELL_M = 0.25
@@ -269,7 +269,8 @@ def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_
     centre, label = sample_route(graph, list(edges), list(froms), DENSE_M)
     if len(centre) < 8:
         raise InputError(where, "the route is shorter than 2 m")
-    width = np.array([road_width(str(graph.edges.highway.iat[e])) for e in label])
+    widths = edge_widths(graph.edges)
+    width = widths[np.asarray(label, int)]
     marked = np.array([has_centre_line(w, int(graph.edges.oneway.iat[e]) == 0) for e, w in zip(label, width)])
     xy = widen_bends(lane_polyline(centre, np.where(marked, width / 4.0, 0.0), smoothing_m), min_radius_m, where)
     step = np.hypot(*np.diff(xy, axis=0).T)
@@ -286,9 +287,9 @@ def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_
     for e in range(graph.num_edges):
         coords = graph.geometry[e]
         if np.any(np.all((coords >= lo) & (coords <= hi), axis=1)):
-            near.append((coords, road_width(str(graph.edges.highway.iat[e]))))
+            near.append((coords, float(widths[e])))
     drivable = _raster(near, origin, shape, margin_m)
-    corridor = _raster([(graph.geometry[e], road_width(str(graph.edges.highway.iat[e]))) for e in set(edges)],
+    corridor = _raster([(graph.geometry[e], float(widths[e])) for e in set(edges)],
                        origin, shape, margin_m)
     route = DriveRoute(list(edges), list(froms), xy, yaw, s, label, width, command, drivable, corridor, origin)
     off = route.off_corridor()

@@ -76,7 +76,8 @@ def build_road_graph(
         length = float(np.hypot(*np.diff(coords, axis=0).T).sum())
         geometry.append(coords)
         records.append((road.nodes[0], road.nodes[-1], length, road.highway, road.name, road.oneway,
-                        ";".join(map(str, road.osm_way_ids)), virtual_node_count(length, virtual_node_spacing_m)))
+                        ";".join(map(str, road.osm_way_ids)), virtual_node_count(length, virtual_node_spacing_m),
+                        road.lanes, road.width_m))
     edges = pd.DataFrame(records, columns=EDGE_COLUMNS)
     edges.index.name = "edge_id"
     degree = pd.concat([edges.u, edges.v]).value_counts()

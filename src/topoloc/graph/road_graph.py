@@ -24,7 +24,7 @@ from topoloc.errors import InputError
 from topoloc.geometry import virtual_node_offsets
 from topoloc.io import atomic_path
 
-EDGE_COLUMNS = ["u", "v", "length_m", "highway", "name", "oneway", "osm_way_ids", "virtual_nodes"]
+EDGE_COLUMNS = ["u", "v", "length_m", "highway", "name", "oneway", "osm_way_ids", "virtual_nodes", "lanes", "width_m"]
 
 
 @dataclass
@@ -38,7 +38,8 @@ class RoadGraph:
     edges
         Indexed by ``edge_id`` (0..E-1): ``u``, ``v``, ``length_m``, ``highway``,
         ``name``, ``oneway`` (+1 only u->v, -1 only v->u, 0 both),
-        ``osm_way_ids``, ``virtual_nodes``.
+        ``osm_way_ids``, ``virtual_nodes``, ``lanes`` and ``width_m`` (the OSM ``lanes`` and ``width`` tags, NaN
+        where untagged; :func:`topoloc.render.textures.carriageway_width` turns them into the road's width).
     geometry
         Per edge id, the ``(n, 2)`` polyline from ``u`` to ``v``.
     crs
@@ -110,6 +111,8 @@ class RoadGraph:
                 oneway=int(row.oneway),
                 osm_way_ids=str(row.osm_way_ids),
                 virtual_nodes=int(row.virtual_nodes),
+                lanes=float(row.lanes),
+                width_m=float(row.width_m),
                 geometry=shapely.LineString(self.geometry[edge_id]).wkt,
             )
         with atomic_path(path) as tmp:
@@ -139,7 +142,8 @@ class RoadGraph:
                 u, v = v, u
             geometry.append(coords)
             records.append((u, v, data["length"], data["highway"], data.get("name", ""), data["oneway"],
-                            data["osm_way_ids"], data["virtual_nodes"]))
+                            data["osm_way_ids"], data["virtual_nodes"], float(data.get("lanes", "nan")),
+                            float(data.get("width_m", "nan"))))
         if [r[0] for r in edge_rows] != list(range(len(edge_rows))):
             raise InputError(path, "edge ids are not 0..E-1")
         edges = pd.DataFrame(records, columns=EDGE_COLUMNS)

@@ -22,7 +22,8 @@ class Road:
     """One road between two kept nodes, oriented so that ``nodes`` is canonical (see :func:`canonical`).
 
     ``oneway`` is +1 (travel only from ``nodes[0]`` to ``nodes[-1]``), -1 (only
-    backwards) or 0 (both ways).
+    backwards) or 0 (both ways). ``lanes`` and ``width_m``: the tags of most of its tagged segments' ways (NaN
+    where none is tagged).
     """
 
     nodes: tuple[int, ...]
@@ -30,6 +31,8 @@ class Road:
     name: str
     oneway: int
     osm_way_ids: tuple[int, ...]
+    lanes: float = float("nan")
+    width_m: float = float("nan")
 
 
 def canonical(nodes: tuple[int, ...]) -> tuple[tuple[int, ...], bool]:
@@ -106,6 +109,8 @@ def _road(chain: tuple[int, ...], segments: dict[tuple[int, int], tuple[int, boo
     nodes, _ = canonical(chain)
     forward = backward = True
     classes: Counter[str] = Counter()
+    lanes: Counter[float] = Counter()
+    widths: Counter[float] = Counter()
     names: list[str] = []
     way_ids: list[int] = []
     for a, b in zip(nodes[:-1], nodes[1:]):
@@ -114,6 +119,8 @@ def _road(chain: tuple[int, ...], segments: dict[tuple[int, int], tuple[int, boo
         forward &= fwd
         backward &= bwd
         classes[way.highway] += 1
+        lanes.update([way.lanes] if way.lanes == way.lanes else [])  # NaN != NaN: untagged
+        widths.update([way.width_m] if way.width_m == way.width_m else [])
         if way.name and way.name not in names:
             names.append(way.name)
         if way.osm_id not in way_ids:
@@ -121,4 +128,9 @@ def _road(chain: tuple[int, ...], segments: dict[tuple[int, int], tuple[int, boo
     rank = {cls: i for i, cls in enumerate(DRIVABLE_HIGHWAY_CLASSES)}
     highway = min(classes, key=lambda cls: (-classes[cls], rank.get(cls, len(rank)), cls))
     oneway = 1 if forward and not backward else -1 if backward and not forward else 0
-    return Road(nodes, highway, ";".join(names), oneway, tuple(way_ids))
+    return Road(nodes, highway, ";".join(names), oneway, tuple(way_ids), _most(lanes), _most(widths))
+
+
+def _most(counts: Counter[float]) -> float:
+    """The most common value (the smallest of a tie), NaN of none."""
+    return min(counts, key=lambda value: (-counts[value], value)) if counts else float("nan")

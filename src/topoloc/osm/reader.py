@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import osmium
@@ -41,7 +41,8 @@ _ONEWAY_BACKWARD = {"-1", "reverse"}
 class Way:
     """One OSM way that carries cars.
 
-    ``oneway`` is +1 (travel only along ``refs``), -1 (only against) or 0 (both).
+    ``oneway`` is +1 (travel only along ``refs``), -1 (only against) or 0 (both). ``lanes`` and ``width_m`` are
+    the ``lanes`` and ``width`` tags (traffic lanes; carriageway width in metres), NaN where untagged or unreadable.
     """
 
     osm_id: int
@@ -49,6 +50,8 @@ class Way:
     highway: str
     name: str
     oneway: int
+    lanes: float = float("nan")
+    width_m: float = float("nan")
 
 
 @dataclass
@@ -122,7 +125,7 @@ def read_road_network(
                 if node is not None:
                     network.missing_node_refs += 1
                 if len(run) >= 2:
-                    network.ways.append(Way(way.osm_id, tuple(run), way.highway, way.name, way.oneway))
+                    network.ways.append(replace(way, refs=tuple(run)))
                 run = []
     except RuntimeError as err:
         raise InputError(path, f"cannot read OSM data ({err})") from err
@@ -141,7 +144,26 @@ def _drivable_way(obj: osmium.osm.Way, classes: set[str], exclude_private: bool)
     refs = tuple(node.ref for node in obj.nodes)
     if len(refs) < 2:
         return None
-    return Way(obj.id, refs, highway, tags.get("name", ""), _oneway(tags, highway))
+    return Way(obj.id, refs, highway, tags.get("name", ""), _oneway(tags, highway), _number(tags.get("lanes")),
+               _metres(tags.get("width")))
+
+
+def _number(value: str | None) -> float:
+    """A positive number tag (``lanes=2``), NaN when absent or not a number (``lanes=2;3``)."""
+    try:
+        number = float(value) if value is not None else float("nan")
+    except ValueError:
+        return float("nan")
+    return number if number > 0 else float("nan")
+
+
+def _metres(value: str | None) -> float:
+    """A length tag in metres (``width=7``, ``7.5 m``, ``7,5``); NaN when absent or in other units (feet, inches)."""
+    if value is None:
+        return float("nan")
+    text = value.strip().replace(",", ".")
+    text = text[:-1].strip() if text.endswith("m") else text
+    return _number(text)
 
 
 def _oneway(tags: osmium.osm.TagList, highway: str) -> int:

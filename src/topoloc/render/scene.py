@@ -41,9 +41,9 @@ from topoloc.render.textures import (
     TILE_W,
     Road,
     draw_ground,
+    edge_widths,
     facade_texture,
     grain_tile,
-    road_width,
 )
 
 log = logging.getLogger(__name__)
@@ -135,7 +135,7 @@ def read_buildings(path: str | Path, crs: str, conf: dict[str, Any], seed: int) 
 
 def graph_roads(graph: RoadGraph) -> list[Road]:
     """Every edge as a :class:`Road`; centre markings stop short of junctions (nodes of degree >= 3)."""
-    widths = np.array([road_width(str(h)) for h in graph.edges.highway])
+    widths = edge_widths(graph.edges)
     node_width: dict[int, float] = {}
     for (u, v), w in zip(zip(graph.edges.u, graph.edges.v), widths):
         node_width[u] = max(node_width.get(u, 0.0), w)

@@ -21,6 +21,7 @@ from functools import lru_cache
 
 import cv2
 import numpy as np
+import pandas as pd
 from numpy.typing import NDArray
 
 TEXEL_M = 0.1
@@ -37,6 +38,10 @@ _SIGNS = np.array([[40, 40, 200], [200, 80, 30], [30, 150, 40], [30, 180, 220], 
 
 ROAD_WIDTH_M = {"motorway": 14.0, "trunk": 12.0, "primary": 12.0, "secondary": 10.0, "tertiary": 9.0,
                 "unclassified": 7.0, "residential": 7.0, "living_street": 5.0, "service": 4.5, "road": 6.0}
+#: Width of one traffic lane, for roads tagged with ``lanes`` only, metres.
+LANE_WIDTH_M = 3.25
+#: A ``width`` tag outside this range (metres) is not taken for a carriageway (it would be a typo or the whole street).
+TAGGED_WIDTH_M = (4.0, 25.0)
 PAVING, SIDEWALK, ASPHALT, MARKING = (132, 136, 138), (160, 162, 163), (82, 82, 84), (225, 228, 230)
 SIDEWALK_M = 3.0
 #: Carriageways at least this wide get edge lines, and a dashed centre line when two-way.
@@ -46,6 +51,24 @@ MARKED_WIDTH_M = 6.0
 def road_width(highway: str) -> float:
     """Carriageway width in metres of an OSM highway class (``*_link`` as 7 m)."""
     return ROAD_WIDTH_M.get(highway, 7.0 if highway.endswith("_link") else 6.0)
+
+
+def carriageway_width(highway: str, lanes: float = float("nan"), width_m: float = float("nan")) -> float:
+    """Carriageway width in metres of a road: its ``width`` tag (:data:`TAGGED_WIDTH_M` bounds it), else its ``lanes``
+    tag times :data:`LANE_WIDTH_M` (at least :data:`TAGGED_WIDTH_M`'s lower bound), else the class default
+    (:func:`road_width`)."""
+    lo, hi = TAGGED_WIDTH_M
+    if np.isfinite(width_m) and lo <= width_m <= hi:
+        return float(width_m)
+    if np.isfinite(lanes) and lanes >= 1:
+        return float(np.clip(lanes * LANE_WIDTH_M, lo, hi))
+    return road_width(highway)
+
+
+def edge_widths(edges: pd.DataFrame) -> NDArray[np.float64]:
+    """:func:`carriageway_width` of every row of a road graph's edge table (``highway``, ``lanes``, ``width_m``)."""
+    return np.array([carriageway_width(str(h), float(n), float(w))
+                     for h, n, w in zip(edges.highway, edges.lanes, edges.width_m)])
 
 
 def has_centre_line(width_m: float, two_way: bool) -> bool:
