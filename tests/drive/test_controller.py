@@ -18,6 +18,7 @@ from topoloc.drive.topo_lp import TopoLP
 from topoloc.drive.train_controller import build_model, fit, signature_example
 from topoloc.errors import InputError
 from topoloc.render.rig import StereoRig
+from topoloc.training import LoggedModel, log_model
 
 
 @pytest.fixture(scope="module")
@@ -107,6 +108,29 @@ def test_each_controller_gets_its_own_output(straight, straight_demos):
     conf = drive | {"network": {**drive["network"], "output": {"dlm": "steer", "lp": "waypoints"}}}
     assert build_model(conf, straight_demos, "dlm").n_outputs == 2
     assert build_model(conf, straight_demos, "lp").n_outputs == 2 * len(WAYPOINT_ARCS) + 1
+
+
+@pytest.mark.parametrize("agent", ["dlm", "lp"])
+def test_a_waypoint_controller_is_logged_to_mlflow_with_its_signature(straight, straight_demos, tmp_path, monkeypatch, agent):
+    """MLflow logs a PyTorch model through torch.export: the pure-pursuit head must trace (a float taken off a tensor
+    there stopped the paper-sized config's train_controller)."""
+    import mlflow
+
+    drive, _ = straight
+    conf = drive | {"network": {**drive["network"], "output": {"dlm": "waypoints", "lp": "waypoints"}}}
+    model = build_model(conf, straight_demos, agent).eval()
+    example = signature_example(straight_demos, agent)
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    mlflow.set_tracking_uri(f"sqlite:///{tmp_path / 'mlflow.db'}")
+    try:
+        with mlflow.start_run():
+            log_model(model, LoggedModel(example, 1))
+            uri = f"runs:/{mlflow.active_run().info.run_id}/model"
+        loaded = mlflow.pytorch.load_model(uri)
+    finally:
+        mlflow.set_tracking_uri(None)
+    with torch.no_grad():
+        assert torch.allclose(loaded(torch.from_numpy(example)), model(torch.from_numpy(example)))
 
 
 def test_topo_lp_learns_the_same_road_from_its_local_path(straight, straight_demos, tmp_path):

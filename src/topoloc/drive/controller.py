@@ -70,7 +70,7 @@ def pure_pursuit(points: torch.Tensor, speed: torch.Tensor, wheelbase: float, ma
     pts = points.reshape(len(points), -1, 2) * WAYPOINT_SCALE_M
     arcs = torch.tensor(WAYPOINT_ARCS, dtype=pts.dtype, device=pts.device)
     look = torch.clamp(lookahead_s * speed.to(pts.dtype), min=min_lookahead_m)
-    at = torch.clamp(look - 0.5 * wheelbase, float(arcs[0]), float(arcs[-1]))
+    at = torch.clamp(look - 0.5 * wheelbase, WAYPOINT_ARCS[0], WAYPOINT_ARCS[-1])  # constants: torch.export (MLflow) traces it
     hi = torch.clamp(torch.searchsorted(arcs, at), 1, len(arcs) - 1)
     w = ((at - arcs[hi - 1]) / (arcs[hi] - arcs[hi - 1]))[:, None]
     rows = torch.arange(len(pts), device=pts.device)
