@@ -18,7 +18,7 @@ from topoloc.drive.lanes import (
     plan_route,
     widen_bends,
 )
-from topoloc.drive.routes import route_of_edges
+from topoloc.drive.routes import random_drive_route, route_of_edges
 from topoloc.drive.simulator import (
     OFF_ROAD,
     RUNNING,
@@ -198,3 +198,26 @@ def test_carriageways_are_as_wide_as_the_map_tags_them(tmp_path, tags, width_m):
     assert route.on_drivable(centre + [0.0, width_m / 2 + 0.25]) and not route.on_drivable(centre + [0.0, width_m / 2 + 1.0])
     offset = float(centre[1] - np.median(route.xy[:, 1]))  # two-way: a quarter of the carriageway right where marked
     assert offset == pytest.approx(width_m / 4 if has_centre_line(width_m, True) else 0.0, abs=0.05)
+
+
+def test_a_lane_drawn_over_another_road_is_shared_and_random_routes_keep_clear_of_it(tmp_path):
+    """A service road 3 m beside a residential street's centre line lies on its 7 m carriageway: the images show one
+    surface, so its lane is shared (not within 15 m of the junctions at its ends); the street's own lane is not.
+    Random routes (training, check) with more than drive.lane.max_shared_m shared are drawn again."""
+    nodes = {1: lonlat(0.0, 0.0), 2: lonlat(20.0, 0.0), 3: lonlat(280.0, 0.0), 4: lonlat(300.0, 0.0),
+             5: lonlat(40.0, 3.0), 6: lonlat(260.0, 3.0)}
+    ways = [(10, [1, 2, 3, 4], {"highway": "residential"}), (11, [2, 5, 6, 3], {"highway": "service"})]
+    graph, _ = build_road_graph(str(write_osm(tmp_path / "beside.osm", nodes, ways)), ["residential", "service"], 20.0)
+    service = int(np.flatnonzero(graph.edges.highway == "service")[0])
+    street = [e for e in range(graph.num_edges) if graph.edges.highway.iat[e] == "residential" and graph.edges.length_m.iat[e] > 200]
+    beside = build_route(graph, [service], [node_at(graph, 20.0, 0.0)])
+    along = build_route(graph, street, [node_at(graph, 20.0, 0.0)])
+    assert 180.0 < beside.shared_m < 240.0 and along.shared_m == 0.0
+    assert not beside.shared[beside.s < 10.0].any()  # at the junction the street covers it as it should
+    assert beside.part(50.0, 100.0).shared_m == pytest.approx(100.0, abs=1.0)
+    conf = make_config()
+    drawn = [random_drive_route(graph, conf, 250.0, np.random.default_rng(k)) for k in range(12)]
+    assert all(r is None or r.shared_m <= 10.0 for r in drawn)
+    conf["drive"]["lane"]["max_shared_m"] = None
+    assert any(r is not None and r.shared_m > 10.0 for r in (random_drive_route(graph, conf, 250.0, np.random.default_rng(k))
+                                                             for k in range(12)))

@@ -134,6 +134,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
             if want_strip:
                 strips.append((f"{condition}: {episode.outcome}", episode.frames))
             rows.append({"episode": key, "route": k, "route_start_m": part.start_m, "route_length_m": route.length_m,
+                         "route_shared_m": route.shared_m,
                          "intersections": intersections(topo.command[lane_s < route.length_m]),
                          "condition": condition, "repeat": repeat, "agent": method_name(agent, loc),
                          "outcome": episode.outcome, "success": episode.outcome == "success", "steps": episode.steps,
@@ -150,10 +151,11 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
 
 
 def route_table(episodes: pd.DataFrame) -> str:
-    """Markdown: success rate per agent (rows) and evaluation route (columns: where it starts, its intersections)."""
+    """Markdown: success rate per agent (rows) and evaluation route (columns: where it starts, its intersections, its
+    metres on other roads' carriageways)."""
     routes = episodes.drop_duplicates("route").set_index("route").sort_index()
     header = ["agent (localization)", *[f"route {k} ({r.route_start_m:.0f}-{r.route_start_m + r.route_length_m:.0f} m, "
-                                        f"{int(r.intersections)} int.)" for k, r in routes.iterrows()]]
+                                        f"{int(r.intersections)} int., {r.route_shared_m:.0f} m shared)" for k, r in routes.iterrows()]]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     rates = episodes.groupby(["agent", "route"], sort=False).success.mean()
     for agent in dict.fromkeys(episodes.agent):
@@ -178,7 +180,8 @@ def write_outputs(episodes: pd.DataFrame, traces: dict[str, np.ndarray], strips:
     steps_per_s = float(episodes.steps.sum() / (episodes.steps / episodes.steps_per_s).sum())
     routes = episodes.drop_duplicates("route")
     facts = {"routes": float(len(parts)), "route_length_m": float(routes.route_length_m.mean()),
-             "drives": float(len(episodes)), "steps_per_s": steps_per_s, "intersections": float(routes.intersections.sum())}
+             "drives": float(len(episodes)), "steps_per_s": steps_per_s, "intersections": float(routes.intersections.sum()),
+             "shared_m": float(routes.route_shared_m.sum())}
     ahead = follow["teach_speed_ahead_m"]
     where = (f"over the first {parts[0].route.length_m:.0f} m of the teach route" if len(parts) == 1 else
              f"on each of {len(parts)} routes of {facts['route_length_m']:.0f} m along the teach route, each with the map "
@@ -188,7 +191,9 @@ def write_outputs(episodes: pd.DataFrame, traces: dict[str, np.ndarray], strips:
             (f"{int(follow['repeats'])} repeat drive(s) per condition and agent {where}; {steps_per_s:.1f} closed-loop "
              "steps/s on this machine (render, controller, localization). "
              + ("No speed limit from the map." if ahead is None else
-                f"Every agent keeps under the teach drive's speed over the next {float(ahead):g} m of the map.")), ""]
+                f"Every agent keeps under the teach drive's speed over the next {float(ahead):g} m of the map. ")
+             + (f"{facts['shared_m']:.0f} m of the routes' lanes run on another road's carriageway too (drawn over each "
+                "other: the images cannot tell which road the route keeps to).")), ""]
     for title, column, fmt in (("Success rate", "success_rate", "{:.2f}"),
                                ("Share of the route driven", "progress_share", "{:.2f}"),
                                ("Mean localization error (m)", "mean_loc_error_m", "{:.1f}")):

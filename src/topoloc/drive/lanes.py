@@ -16,7 +16,10 @@ else its ``lanes`` tag times a lane width, else a per-class default. Each lane s
 
 Two rasters (0.25 m cells) judge where the vehicle is: the **drivable area** (every road of the graph near
 the route, as wide as its carriageway plus ``margin_m``) and the **corridor** (the route's own roads only).
-A point off the drivable area is *off road*; on it but off the corridor, on a *wrong road*.
+A point off the drivable area is *off road*; on it but off the corridor, on a *wrong road*. Lane points on another
+road's carriageway too, away from junctions, are **shared** (:func:`shared_samples`): there the images show one surface
+and cannot tell the route's road from the other; training and check routes keep clear of them
+(``drive.lane.max_shared_m``).
 """
 
 from __future__ import annotations
@@ -39,6 +42,8 @@ from topoloc.render.textures import edge_widths, has_centre_line
 DENSE_M = 0.25
 CELL_M = 0.25
 RASTER_MARGIN_M = 40.0
+#: Lane points this close to a junction are not counted as shared with the crossing roads (:func:`shared_samples`).
+JUNCTION_M = 15.0
 
 
 def check_route(graph: RoadGraph, edges: list[int], froms: list[int], where: str = "route") -> None:
@@ -107,7 +112,8 @@ def _nearer(graph: RoadGraph, nodes: tuple[int, int], xy: NDArray[np.float64]) -
 @dataclass
 class DriveRoute:
     """The lane of a route (see the module docstring): samples ``xy``, heading ``yaw``, arc length ``s``, road
-    ``edge``, carriageway ``width`` and ``command`` (index into :data:`COMMANDS`) every :data:`DENSE_M`."""
+    ``edge``, carriageway ``width``, ``command`` (index into :data:`COMMANDS`) and ``shared`` (on another road's
+    carriageway too, :func:`shared_samples`) every :data:`DENSE_M`."""
 
     edges: list[int]
     froms: list[int]
@@ -117,6 +123,7 @@ class DriveRoute:
     edge: NDArray[np.int64]
     width: NDArray[np.float64]
     command: NDArray[np.int64]
+    shared: NDArray[np.bool_] = field(repr=False)
     drivable: NDArray[np.uint8] = field(repr=False)
     corridor: NDArray[np.uint8] = field(repr=False)
     origin: tuple[float, float] = (0.0, 0.0)  #: map position of the rasters' top-left corner
@@ -201,7 +208,12 @@ class DriveRoute:
         keep = [i for i, e in enumerate(self.edges) if e in used]
         return DriveRoute([self.edges[i] for i in keep], [self.froms[i] for i in keep], self.xy[lo:hi], self.yaw[lo:hi],
                           self.s[lo:hi] - self.s[lo], self.edge[lo:hi], self.width[lo:hi], self.command[lo:hi],
-                          self.drivable, self.corridor, self.origin)
+                          self.shared[lo:hi], self.drivable, self.corridor, self.origin)
+
+    @property
+    def shared_m(self) -> float:
+        """Metres of the lane on another road's carriageway too (:func:`shared_samples`)."""
+        return float(self.shared.sum()) * DENSE_M
 
 
 def lane_polyline(centre: NDArray[np.float64], offset: NDArray[np.float64], smoothing_m: float) -> NDArray[np.float64]:
@@ -257,6 +269,24 @@ def _raster(lines: list[tuple[NDArray[np.float64], float]], origin: tuple[float,
     return out
 
 
+def shared_samples(xy: NDArray[np.float64], others: NDArray[np.uint8], origin: tuple[float, float],
+                   junctions: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which lane points ``xy`` lie on the carriageway of a road not on the route (raster ``others``) more than
+    :data:`JUNCTION_M` from every junction: where two roads are drawn over each other (a service road beside a street,
+    the two ways of a dual carriageway drawn too wide), and the camera shows one surface with no sign of which is the
+    route's. Near a junction the crossing roads' carriageways cover the lane as they should."""
+    rows = ((origin[1] - xy[:, 1]) / CELL_M).astype(int)
+    cols = ((xy[:, 0] - origin[0]) / CELL_M).astype(int)
+    h, w = others.shape
+    inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+    on = np.zeros(len(xy), bool)
+    on[inside] = others[rows[inside], cols[inside]] > 0
+    if on.any() and len(junctions):
+        near = np.min(np.hypot(*(xy[on][:, None, :] - junctions[None]).transpose(2, 0, 1)), axis=1) <= JUNCTION_M
+        on[np.flatnonzero(on)[near]] = False
+    return on
+
+
 def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_m: float = 4.0,
                 margin_m: float = 0.5, command_m: float = 20.0, lookahead_m: float = 10.0, straight_deg: float = 45.0,
                 where: str = "route", min_radius_m: float = 5.0) -> DriveRoute:
@@ -283,15 +313,13 @@ def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_
     lo, hi = centre.min(axis=0) - RASTER_MARGIN_M, centre.max(axis=0) + RASTER_MARGIN_M
     origin = (float(lo[0]), float(hi[1]))
     shape = (int(np.ceil((hi[1] - lo[1]) / CELL_M)) + 1, int(np.ceil((hi[0] - lo[0]) / CELL_M)) + 1)
-    near = []
-    for e in range(graph.num_edges):
-        coords = graph.geometry[e]
-        if np.any(np.all((coords >= lo) & (coords <= hi), axis=1)):
-            near.append((coords, float(widths[e])))
-    drivable = _raster(near, origin, shape, margin_m)
+    near = [e for e in range(graph.num_edges) if np.any(np.all((graph.geometry[e] >= lo) & (graph.geometry[e] <= hi), axis=1))]
+    drivable = _raster([(graph.geometry[e], float(widths[e])) for e in near], origin, shape, margin_m)
     corridor = _raster([(graph.geometry[e], float(widths[e])) for e in set(edges)],
                        origin, shape, margin_m)
-    route = DriveRoute(list(edges), list(froms), xy, yaw, s, label, width, command, drivable, corridor, origin)
+    others = _raster([(graph.geometry[e], float(widths[e])) for e in near if e not in set(edges)], origin, shape, 0.0)
+    shared = shared_samples(xy, others, origin, graph.nodes.loc[graph.nodes.degree >= 3, ["x", "y"]].to_numpy(float))
+    route = DriveRoute(list(edges), list(froms), xy, yaw, s, label, width, command, shared, drivable, corridor, origin)
     off = route.off_corridor()
     if off.any():
         raise InputError(where, f"the lane leaves the route's roads at {s[int(np.argmax(off))]:.0f} m (a bend of a narrow "

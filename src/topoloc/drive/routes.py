@@ -4,7 +4,9 @@
   the route of the ``render_places`` teach drive and so of the topometric map), as a chain of road edges
   whose lane (:mod:`topoloc.drive.lanes`) ends where that path ends.
 * **Training routes** are random walks (:func:`topoloc.motion.route.random_route`, one-way roads respected,
-  cut where they turn back at a dead end) seeded by ``drive.seed``, the route index and the attempt.
+  cut where they turn back at a dead end) seeded by ``drive.seed``, the route index and the attempt; a walk whose lane
+  runs on other roads' carriageways for more than ``drive.lane.max_shared_m`` is drawn again (the images could not
+  show which road to keep to).
 * A route's **simulator** renders the scene around its lane (``render.buildings``, ``render.view_distance_m``)
   with the controller's camera (:func:`drive_rig`): the place images' camera (``place.image``) with rows added below
   until it sees the ground ``drive.camera.nearest_ground_m`` ahead. The place images' camera sees the road from
@@ -63,7 +65,8 @@ def evaluation_route(graph: RoadGraph, conf: dict[str, Any]) -> DriveRoute:
 
 
 def random_drive_route(graph: RoadGraph, conf: dict[str, Any], length_m: float, rng: np.random.Generator) -> DriveRoute | None:
-    """A random route of about ``length_m`` (None when the walk is too short or cannot be built)."""
+    """A random route of about ``length_m`` (None when the walk is too short, cannot be built, or runs on other roads'
+    carriageways for more than ``drive.lane.max_shared_m``)."""
     edges, froms = random_route(graph, length_m, rng)
     for i in range(1, len(edges)):
         if edges[i] == edges[i - 1]:  # turned back at a dead end
@@ -75,7 +78,9 @@ def random_drive_route(graph: RoadGraph, conf: dict[str, Any], length_m: float, 
         route = route_of_edges(graph, edges, froms, conf)
     except InputError:
         return None
-    return route.cut(length_m) if route.length_m > length_m else route
+    route = route.cut(length_m) if route.length_m > length_m else route
+    shared = conf["drive"]["lane"]["max_shared_m"]
+    return None if shared is not None and route.shared_m > float(shared) else route
 
 
 def drive_rig(conf: dict[str, Any]) -> StereoRig:
