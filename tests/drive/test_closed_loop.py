@@ -115,6 +115,10 @@ def test_repeat_routes_split_the_teach_route_each_with_the_map_of_its_stretch(to
         assert part.lane_s[0] < 1.0 and part.lane_s[-1] <= route.length_m + 0.5 and len(part.topo) == len(part.lane_s)
         assert np.allclose(part.lane_s, vertex_lane_s(route, part.topo), atol=0.3)
     assert set(parts[0].route.command.tolist()) == {0} and 2 in parts[2].route.command  # the right turn is on the last
+    # the corridor of a part is its own roads: the road the teach route turns into after the first part is a wrong road
+    south = teach.point(teach.length_m - 5.0)
+    assert teach.on_corridor(south) and not parts[0].route.on_corridor(south) and parts[2].route.on_corridor(south)
+    assert all(parts[0].route.on_corridor(xy) for xy in parts[0].route.xy[::20])
     last = parts[2]
     sim = Simulator(last.route, route_scene(town["osm"], town_graph, last.route), StereoRig.kitti(64, 48, 0.54, 1.65),
                     VehicleSpec.from_conf(drive), 100.0)

@@ -193,12 +193,15 @@ class DriveRoute:
         return bool(0 <= r < h and 0 <= c < w and self.corridor[r, c])
 
     def cut(self, length_m: float) -> DriveRoute:
-        """The first ``length_m`` metres of the lane (the rasters are kept)."""
+        """The first ``length_m`` metres of the lane (:meth:`part`)."""
         return self.part(0.0, length_m)
 
     def part(self, start_m: float, length_m: float, where: str = "drive.follow.length_m") -> DriveRoute:
-        """The lane from arc length ``start_m`` on for ``length_m`` metres, its arc length counted from there (the rasters
-        are kept); InputError naming ``where`` when that leaves no lane to drive."""
+        """The lane from arc length ``start_m`` on for ``length_m`` metres, its arc length counted from there; InputError
+        naming ``where`` when that leaves no lane to drive. The drivable area is kept; the corridor keeps the cells of
+        the route's roads near the part's lane only (within three quarters of the widest carriageway and 2 m: the lane
+        keeps at most a quarter right of the centre line), so a car that leaves the part for a road the route takes
+        before or after it is on a wrong road."""
         lo = int(np.searchsorted(self.s, start_m, side="left"))
         hi = int(np.searchsorted(self.s, start_m + length_m, side="right"))
         if hi - lo < 2:
@@ -206,9 +209,13 @@ class DriveRoute:
                              f"{self.length_m:.0f} m long)")
         used = set(self.edge[lo:hi].tolist())
         keep = [i for i, e in enumerate(self.edges) if e in used]
+        corridor = self.corridor
+        if lo > 0 or hi < len(self.s):
+            band = _raster([(self.xy[lo:hi], 1.5 * float(self.width[lo:hi].max()))], self.origin, self.corridor.shape, 2.0)
+            corridor = self.corridor & band
         return DriveRoute([self.edges[i] for i in keep], [self.froms[i] for i in keep], self.xy[lo:hi], self.yaw[lo:hi],
                           self.s[lo:hi] - self.s[lo], self.edge[lo:hi], self.width[lo:hi], self.command[lo:hi],
-                          self.shared[lo:hi], self.drivable, self.corridor, self.origin)
+                          self.shared[lo:hi], self.drivable, corridor, self.origin)
 
     @property
     def shared_m(self) -> float:
