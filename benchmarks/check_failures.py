@@ -7,11 +7,12 @@ Usage (after ``train_controller`` built ``results/<region>/drive/<agent>/control
 
 Drives the check's routes (:func:`topoloc.drive.on_policy.closed_loop_check`: the same seeds, conditions and start
 offsets; the controller alone, told the route's command or local path) and prints one row per failed route: where
-it ended, the commands of its last 40 steps, its speed against the expert's target speed there, its steering against
-the expert's over the last second, and the metres of the route's lane shared with another road's carriageway
-(:func:`topoloc.drive.lanes.shared_samples`). Then the totals: success rate, failures by outcome, failures within
-20 m of the start, failures under a turn command, and the mean ratio of the controller's steering to the expert's
-where the expert steers hard (|steer| > 0.3) in a failure's last second: below 1, it under-steers.
+it ended, the commands of its last 40 steps, its speed at the last step against the expert's lowest target speed
+over the last second, its mean steering against the expert's over the last second, and the metres of the route's
+lane shared with another road's carriageway (:func:`topoloc.drive.lanes.shared_samples`). Then the totals: success
+rate, failures by outcome, failures within 20 m of the start, failures under a turn command, and the median ratio
+of the controller's steering to the expert's where the expert steers hard (|steer| > 0.3) in a failure's last
+second: below 1, it under-steers; below 0, it steers the other way.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import torch
 import yaml
 
 from topoloc.config import deep_merge, load
-from topoloc.drive.controller import load_controller
+from topoloc.drive.controller import TopoDLM, load_controller
 from topoloc.drive.demonstrations import as_input, training_route
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.on_policy import CHECK_STREAM, controller_input
@@ -35,7 +36,8 @@ from topoloc.graph.road_graph import RoadGraph
 from topoloc.place.topometric_map import COMMANDS
 
 
-def drive_route(conf: dict, agent: str, model, r: int, avoid, graph: RoadGraph, osm: str | None) -> dict:
+def drive_route(conf: dict, agent: str, model: TopoDLM, r: int, avoid: np.ndarray, graph: RoadGraph,
+                osm: str | None) -> dict:
     """Check route ``r`` driven by ``model``: its outcome and the last steps' trace."""
     drive = conf["drive"]
     length = float(drive["demonstrations"]["route_length_m"])

@@ -106,7 +106,9 @@ def test_repeat_routes_split_the_teach_route_each_with_the_map_of_its_stretch(to
     teach = town_route(town_graph, "right", drive).cut(175.0)
     topo = lane_map(teach)
     parts = repeat_routes(teach, topo, 60.0, 3)
-    assert [p.start_m for p in parts] == pytest.approx([0.0, (teach.length_m - 60.0) / 2, teach.length_m - 60.0])
+    assert [p.start_m for p in parts] == pytest.approx([0.0, (teach.length_m - 60.0) / 2, teach.length_m - 60.0], abs=0.3)
+    assert [p.start_m for p in parts] == [teach.s[np.searchsorted(teach.s, p.start_m)] for p in parts]  # lane samples
+    assert np.allclose(parts[-1].topo.gt_xy[-1], topo.gt_xy[-1])  # the last route keeps the goal's vertex
     for part in parts:
         route = part.route
         assert route.s[0] == 0.0 and route.length_m == pytest.approx(60.0, abs=0.3)

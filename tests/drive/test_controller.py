@@ -121,14 +121,17 @@ def test_a_waypoint_controller_is_logged_to_mlflow_with_its_signature(straight, 
     model = build_model(conf, straight_demos, agent).eval()
     example = signature_example(straight_demos, agent)
     monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    monkeypatch.chdir(tmp_path)  # the artifacts of an sqlite store go to ./mlruns
     mlflow.set_tracking_uri(f"sqlite:///{tmp_path / 'mlflow.db'}")
     try:
         with mlflow.start_run():
             log_model(model, LoggedModel(example, 1))
             uri = f"runs:/{mlflow.active_run().info.run_id}/model"
         loaded = mlflow.pytorch.load_model(uri)
+        signature = mlflow.models.get_model_info(uri).signature
     finally:
         mlflow.set_tracking_uri(None)
+    assert signature is not None and list(signature.inputs.to_dict()[0]["tensor-spec"]["shape"]) == [-1, *example.shape[1:]]
     with torch.no_grad():
         assert torch.allclose(loaded(torch.from_numpy(example)), model(torch.from_numpy(example)))
 

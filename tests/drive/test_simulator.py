@@ -8,6 +8,7 @@ import pytest
 from tests.conftest import make_config, write_osm
 from tests.drive.conftest import TOWN_ROUTES, drive_conf, node_at, route_scene, town_route
 from tests.render.conftest import lonlat
+from topoloc.drive.demonstrations import training_route
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.lanes import (
     DENSE_M,
@@ -217,7 +218,11 @@ def test_a_lane_drawn_over_another_road_is_shared_and_random_routes_keep_clear_o
     assert beside.part(50.0, 100.0).shared_m == pytest.approx(100.0, abs=1.0)
     conf = make_config()
     drawn = [random_drive_route(graph, conf, 250.0, np.random.default_rng(k)) for k in range(12)]
-    assert all(r is None or r.shared_m <= 10.0 for r in drawn)
+    assert all(r is None or r.shared_m <= 10.0 for r in drawn) and any(r is not None for r in drawn)
+    with pytest.raises(InputError, match=r"^drive\.lane\.max_shared_m: route 0 .*none of 20 draws"):
+        training_route(0, conf, None, lambda rng: None)
+    with pytest.raises(InputError, match=r"^drive\.demonstrations\.min_distance_m: route 0"):
+        training_route(0, conf, beside.xy, lambda rng: beside)
     conf["drive"]["lane"]["max_shared_m"] = None
     assert any(r is not None and r.shared_m > 10.0 for r in (random_drive_route(graph, conf, 250.0, np.random.default_rng(k))
                                                              for k in range(12)))

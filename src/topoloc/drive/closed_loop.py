@@ -8,8 +8,8 @@ by a localization on the topometric map.
   true distance with the noise model of ``place.odometry_noise``: a scale error per drive and white noise).
   It is *unsure* when no answer of the last ``lost_steps`` steps had a confidence of at least
   ``place.localize.threshold``; the agents then slow down to ``slow_mps`` (as the paper does while relocalizing).
-* **Speed limit from the map**: the map's vertices keep the teach drive's target speed (the replay agent drives by
-  it); with ``teach_speed_ahead_m`` every agent stays under the lowest of them from its localized vertex to that far
+* **Speed limit from the map**: the teach drive's target speed at each map vertex, recorded from the expert's teach
+  drive of the route (the replay agent drives by it); with ``teach_speed_ahead_m`` every agent stays under the lowest of them from its localized vertex to that far
   ahead (:func:`speed_limit_ahead`). The controllers predict their target speed from the image, and at 6 m/s a 5 m
   radius junction turn is taken too fast; the map knows the teach drive slowed there.
 * **Agents**: :class:`DLMAgent` (Topo-DLM: the image, the speed and the vertex's command), :class:`LPAgent`
@@ -92,6 +92,7 @@ def repeat_routes(teach: DriveRoute, topo: TopometricMap, length_m: float | None
     out = []
     for start in route_starts(teach.length_m, length_m, routes):
         route = teach.part(start, teach.length_m - start if length_m is None else float(length_m))
+        start = float(teach.s[np.searchsorted(teach.s, start, side="left")])  # the part's first lane sample
         lo = int(np.searchsorted(lane_s, start, side="left"))
         hi = int(np.searchsorted(lane_s, start + route.length_m, side="right"))
         if hi - lo < 2:

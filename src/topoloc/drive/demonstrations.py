@@ -195,14 +195,19 @@ def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] |
     demo_conf = drive["demonstrations"]
     every = int(demo_conf.get("record_every", 1))
     step_m = float(drive["expert"]["cruise_mps"]) / float(drive["episode"]["control_hz"])
+    drawn = 0
     for attempt in range(20):
         route = make_route(np.random.default_rng([int(drive["seed"]), stream, r, attempt]))
         if route is None:
             continue
+        drawn += 1
         near = polyline_distance(route.xy[::8], avoid_xy) < float(demo_conf["min_distance_m"]) if avoid_xy is not None \
             else np.zeros(len(route.xy[::8]), bool)
         if (1.0 - near.mean()) * route.length_m / step_m / every >= int(demo_conf["min_steps"]):
             return route
+    if not drawn:
+        raise InputError("drive.lane.max_shared_m", f"route {r} (seed stream {stream}): none of 20 draws gave a drivable "
+                         "route (each ran into a dead end or shared more lane with another road's carriageway)")
     raise InputError("drive.demonstrations.min_distance_m", f"route {r} (seed stream {stream}): no route keeps "
                      f"{demo_conf['min_steps']} steps {demo_conf['min_distance_m']} m away from the teach route")
 

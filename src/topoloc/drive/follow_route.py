@@ -14,7 +14,8 @@ start offset and odometry noise.
 Outputs: ``episodes`` (one row per drive: outcome, progress, localization error, speed of the loop),
 ``summary`` (success rate per condition and agent, over routes and repeats), ``table`` (like the paper's Tables 1
 and 2: success rate per condition and the mean, held-out conditions of the controller's training marked; with several
-routes also per route), ``metrics``, ``paths``
+routes also per route), ``metrics`` (success per agent and route; ``intersections`` and ``shared_m`` summed over the
+routes, a stretch counted once per route that holds it), ``paths``
 (the driven paths over the map), ``success`` (bars) and ``strip`` (frames of one repeat per condition).
 """
 
@@ -190,7 +191,7 @@ def write_outputs(episodes: pd.DataFrame, traces: dict[str, np.ndarray], strips:
              f"{', '.join(trained)}; held out: {', '.join(held_out) or 'none'})"), "",
             (f"{int(follow['repeats'])} repeat drive(s) per condition and agent {where}; {steps_per_s:.1f} closed-loop "
              "steps/s on this machine (render, controller, localization). "
-             + ("No speed limit from the map." if ahead is None else
+             + ("No speed limit from the map. " if ahead is None else
                 f"Every agent keeps under the teach drive's speed over the next {float(ahead):g} m of the map. ")
              + (f"{facts['shared_m']:.0f} m of the routes' lanes run on another road's carriageway too (drawn over each "
                 "other: the images cannot tell which road the route keeps to).")), ""]

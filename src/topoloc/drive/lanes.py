@@ -32,6 +32,7 @@ import networkx as nx
 import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
+from scipy.spatial import cKDTree
 
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
@@ -289,8 +290,8 @@ def shared_samples(xy: NDArray[np.float64], others: NDArray[np.uint8], origin: t
     on = np.zeros(len(xy), bool)
     on[inside] = others[rows[inside], cols[inside]] > 0
     if on.any() and len(junctions):
-        near = np.min(np.hypot(*(xy[on][:, None, :] - junctions[None]).transpose(2, 0, 1)), axis=1) <= JUNCTION_M
-        on[np.flatnonzero(on)[near]] = False
+        dist, _ = cKDTree(junctions).query(xy[on])
+        on[np.flatnonzero(on)[dist <= JUNCTION_M]] = False
     return on
 
 

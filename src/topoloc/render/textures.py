@@ -55,7 +55,7 @@ def road_width(highway: str) -> float:
 
 def carriageway_width(highway: str, lanes: float = float("nan"), width_m: float = float("nan")) -> float:
     """Carriageway width in metres of a road: its ``width`` tag (:data:`TAGGED_WIDTH_M` bounds it), else its ``lanes``
-    tag times :data:`LANE_WIDTH_M` (at least :data:`TAGGED_WIDTH_M`'s lower bound), else the class default
+    tag times :data:`LANE_WIDTH_M` (within :data:`TAGGED_WIDTH_M`'s bounds too), else the class default
     (:func:`road_width`)."""
     lo, hi = TAGGED_WIDTH_M
     if np.isfinite(width_m) and lo <= width_m <= hi:
