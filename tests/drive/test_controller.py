@@ -149,3 +149,35 @@ def test_topo_lp_learns_the_same_road_from_its_local_path(straight, straight_dem
     status, lateral = _closed_loop(sim, lambda obs: loaded.act(obs.image, obs.speed, path))
     assert status == SUCCESS
     assert np.mean(np.abs(lateral[30:])) < 0.4
+
+
+def test_topo_lp_image_dropout_hides_the_image_from_the_head_in_training_only(straight, straight_demos, tmp_path):
+    """drive.train.image_dropout: the training samples it drops reach the head without their image features (the head
+    must steer by the path); evaluation always sees the image; the setting survives the checkpoint."""
+    drive, _ = straight
+    model = build_model(drive | {"train": {**drive["train"], "image_dropout": 0.9}}, straight_demos, "lp")
+    assert build_model(drive, straight_demos, "lp").hparams.image_dropout == 0.0
+    assert "image_dropout" not in build_model(drive | {"train": {**drive["train"], "image_dropout": 0.9}},
+                                              straight_demos, "dlm").hparams
+    images = torch.from_numpy(straight_demos.images[:64]).permute(0, 3, 1, 2).float()
+    other = torch.flip(images, dims=[3])  # the same steps seen mirrored
+    speed = torch.from_numpy(straight_demos.speed[:64])
+    paths = torch.from_numpy(np.stack([raster(map_path(np.column_stack([np.arange(30.0), np.zeros(30)]), 0))] * 64))
+    model.train()
+    torch.manual_seed(0)
+    a, _ = model._lp_heads(model._shrink(images), speed, paths)
+    model._image_generator = None  # the same draw of dropped samples again, and of the network's dropout
+    torch.manual_seed(0)
+    b, _ = model._lp_heads(model._shrink(other), speed, paths)
+    same = torch.isclose(a, b).all(dim=1)
+    assert 0.75 < float(same.float().mean()) < 1.0  # about 90 % of the samples never saw their image
+    model.eval()
+    with torch.no_grad():
+        assert not torch.isclose(model._lp_heads(model._shrink(images), speed, paths)[0],
+                                 model._lp_heads(model._shrink(other), speed, paths)[0]).all(dim=1).any()
+    path = tmp_path / "lp.ckpt"
+    torch.save({"state_dict": model.state_dict(), "hyper_parameters": dict(model.hparams),
+                "pytorch-lightning_version": "2.0.0"}, path)
+    assert load_controller(path, cls=TopoLP).hparams.image_dropout == 0.9
+    with pytest.raises(InputError, match="drive.train.image_dropout"):
+        TopoLP(image_dropout=1.0)

@@ -22,6 +22,7 @@ from torch import nn
 
 from topoloc.drive.controller import TopoDLM
 from topoloc.drive.local_path import PATH_PX
+from topoloc.errors import InputError
 
 PATH_FEATURES = 64
 
@@ -29,8 +30,12 @@ PATH_FEATURES = 64
 class TopoLP(TopoDLM):
     """The local-path controller of the module docstring (Topo-DLM's encoders, a path encoder, one head)."""
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, image_dropout: float = 0.0, **kwargs: Any) -> None:
         super().__init__(**kwargs)
+        if not 0.0 <= float(image_dropout) < 1.0:
+            raise InputError("drive.train.image_dropout", f"must be in [0, 1), got {image_dropout}")
+        self.hparams["image_dropout"] = float(image_dropout)  # kept in the checkpoint with the parent's hparams
+        self._image_generator: torch.Generator | None = None
         hidden, dropout = int(self.hparams.hidden), float(self.hparams.dropout)
         self.path_encoder = nn.Sequential(
             nn.Conv2d(1, 8, 3, 2, 1), nn.ReLU(inplace=True), nn.Conv2d(8, 16, 3, 2, 1), nn.ReLU(inplace=True),
@@ -43,8 +48,18 @@ class TopoLP(TopoDLM):
         """The head's outputs ``(N, n_outputs)`` and the speed prediction of shrunk images and path images (N, P, P)."""
         feat = self.image_fc(torch.flatten(self.encoder(self._normalize(images)), 1))
         path = self.path_encoder(paths[:, None].float() / 255.0)
-        joint = self.joint(torch.cat([feat, self.speed_fc(speed[:, None] / self.hparams.max_speed), path], dim=1))
+        seen = feat
+        p = float(self.hparams.get("image_dropout", 0.0))
+        if self.training and p > 0:  # whole samples without the image: the head must steer by the path too
+            keep = torch.rand(len(feat), 1, device=feat.device, generator=self._dropout_generator(feat.device)) >= p
+            seen = feat * keep
+        joint = self.joint(torch.cat([seen, self.speed_fc(speed[:, None] / self.hparams.max_speed), path], dim=1))
         return self.branches[0](joint), self.speed_head(feat)[:, 0]
+
+    def _dropout_generator(self, device: torch.device) -> torch.Generator:
+        if self._image_generator is None:
+            self._image_generator = torch.Generator(device=device).manual_seed(int(self.hparams.seed) + 1)
+        return self._image_generator
 
     def forward(self, inputs: torch.Tensor) -> torch.Tensor:
         """(steer, target speed m/s) ``(N, 2)`` of ``(N, C + 2, H, W)``: image, speed plane, path plane (module docstring)."""
