@@ -11,7 +11,8 @@ the training noise), as in training. For the validation routes (the last
 and as many with less (seeded), and prints per bin of |label|: the steps, the mean absolute error, the median ratio
 of the controller's steering to the label and the share with the label's sign. Ratios near 1 with the right sign
 where the closed-loop check fails (``check_failures.py``) mean the failures come from states the demonstrations do
-not hold, not from a fit the network missed.
+not hold, not from a fit the network missed. For Topo-LP also how much the local path moves the steering: on
+``--steps`` validation steps, the mean change when each step gets another step's path image, or a straight one.
 """
 
 from __future__ import annotations
@@ -32,13 +33,30 @@ from topoloc.drive.topo_lp import CONTROLLERS
 BINS = [(0.0, 0.1), (0.1, 0.3), (0.3, 0.5), (0.5, 0.8), (0.8, 1.01)]
 
 
-def predictions(model: torch.nn.Module, agent: str, demos: Demonstrations, idx: np.ndarray) -> np.ndarray:
-    """The controller's steering on the recorded steps ``idx``."""
+def predictions(model: torch.nn.Module, agent: str, demos: Demonstrations, idx: np.ndarray,
+                paths: np.ndarray | None = None) -> np.ndarray:
+    """The controller's steering on the recorded steps ``idx`` (Topo-LP: with the local paths of the steps ``paths``,
+    default their own)."""
     out = []
-    for k in idx:
-        told = raster(lane_frame_path(demos.path[k])) if agent == "lp" else int(demos.command[k])
+    for i, k in enumerate(idx):
+        if agent == "lp":
+            told = raster(lane_frame_path(demos.path[k if paths is None else paths[i]]))
+        else:
+            told = int(demos.command[k])
         out.append(model.act(demos.images[k], float(demos.speed[k]), told)[0])
     return np.array(out)
+
+
+def path_effect(model: torch.nn.Module, demos: Demonstrations, idx: np.ndarray, rng: np.random.Generator) -> str:
+    """How much Topo-LP's steering on steps ``idx`` moves with another step's local path, and with a straight one."""
+    own = predictions(model, "lp", demos, idx)
+    other = predictions(model, "lp", demos, idx, rng.choice(idx, len(idx)))
+    straight = raster(lane_frame_path(np.column_stack([np.arange(1.0, 21.0), np.zeros(20)]).astype(np.float32)))
+    flat = np.array([model.act(demos.images[k], float(demos.speed[k]), straight)[0] for k in idx])
+    label = demos.steer[idx]
+    return (f"local path, {len(idx)} validation steps: mean |change| of the steering with another step's path "
+            f"{np.abs(other - own).mean():.3f}, with a straight path {np.abs(flat - own).mean():.3f}; MAE against the "
+            f"labels {np.abs(own - label).mean():.3f} (own path), {np.abs(other - label).mean():.3f} (another's)")
 
 
 def main() -> None:
@@ -74,6 +92,9 @@ def main() -> None:
                 ratio = f"{np.median(pred[m] / label[m]):.2f}" if lo > 0 else "-"
                 print(f"| {name} | {lo}-{min(hi, 1.0)} | {int(m.sum())} | {np.abs(pred[m] - label[m]).mean():.3f} | "
                       f"{ratio} | {np.mean(np.sign(pred[m]) == np.sign(label[m])):.2f} |")
+    if args.agent == "lp":
+        val_idx = np.flatnonzero(val)
+        print("\n" + path_effect(model, demos, rng.choice(val_idx, min(args.steps, len(val_idx)), replace=False), rng))
 
 
 if __name__ == "__main__":
