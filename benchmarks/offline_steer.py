@@ -5,14 +5,15 @@ Usage (after ``train_controller`` built ``results/<region>/drive/<agent>/control
     PYTHONPATH=src python benchmarks/offline_steer.py --agent lp [--config config/config.yaml]
         [--also config/drive_paper.yaml] [--controller CKPT] [--steps 600]
 
-Open loop: the controller sees the recorded steps (image, speed, and the command or the local-path image without
-the training noise), as in training. For the validation routes (the last
-``drive.demonstrations.val_routes``) and the training routes of ``results/<region>/drive/demonstrations.npz`` it draws ``--steps`` steps with |label| > 0.5
-and as many with less (seeded), and prints per bin of |label|: the steps, the mean absolute error, the median ratio
-of the controller's steering to the label and the share with the label's sign. Ratios near 1 with the right sign
-where the closed-loop check fails (``check_failures.py``) mean the failures come from states the demonstrations do
-not hold, not from a fit the network missed. For Topo-LP also how much the local path moves the steering: on
-``--steps`` validation steps, the mean change when each step gets another step's path image, or a straight one.
+Open loop: the controller sees the recorded steps (image, speed, and the command or the local-path image without the
+training noise), as in training. For the validation routes (the last ``drive.demonstrations.val_routes``) and the
+training routes of ``results/<region>/drive/demonstrations.npz`` it draws ``--steps`` steps with |label| > 0.5 and as
+many with less (seeded), and prints per bin of |label|: the steps, the mean absolute error, the median ratio of the
+controller's steering to the label and the share with the label's sign. Ratios near 1 with the right sign where the
+closed-loop check fails (``check_failures.py``) mean the failures come from states the demonstrations do not hold,
+not from a fit the network missed. For Topo-LP also how much the local path moves the steering: on
+``--steps`` validation steps, the mean change when each step gets the path image of a step on another validation
+route, or a straight one.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import torch
 import yaml
 
 from topoloc.config import deep_merge, load
-from topoloc.drive.controller import load_controller
+from topoloc.drive.controller import TopoDLM, load_controller
 from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.local_path import lane_frame_path, raster
 from topoloc.drive.topo_lp import CONTROLLERS
@@ -33,7 +34,7 @@ from topoloc.drive.topo_lp import CONTROLLERS
 BINS = [(0.0, 0.1), (0.1, 0.3), (0.3, 0.5), (0.5, 0.8), (0.8, 1.01)]
 
 
-def predictions(model: torch.nn.Module, agent: str, demos: Demonstrations, idx: np.ndarray,
+def predictions(model: TopoDLM, agent: str, demos: Demonstrations, idx: np.ndarray,
                 paths: np.ndarray | None = None) -> np.ndarray:
     """The controller's steering on the recorded steps ``idx`` (Topo-LP: with the local paths of the steps ``paths``,
     default their own)."""
@@ -47,10 +48,11 @@ def predictions(model: torch.nn.Module, agent: str, demos: Demonstrations, idx: 
     return np.array(out)
 
 
-def path_effect(model: torch.nn.Module, demos: Demonstrations, idx: np.ndarray, rng: np.random.Generator) -> str:
+def path_effect(model: TopoDLM, demos: Demonstrations, idx: np.ndarray, rng: np.random.Generator) -> str:
     """How much Topo-LP's steering on steps ``idx`` moves with another step's local path, and with a straight one."""
     own = predictions(model, "lp", demos, idx)
-    other = predictions(model, "lp", demos, idx, rng.choice(idx, len(idx)))
+    swap = np.array([rng.choice(idx[demos.route[idx] != demos.route[k]]) for k in idx])  # another route's step
+    other = predictions(model, "lp", demos, idx, swap)
     straight = raster(lane_frame_path(np.column_stack([np.arange(1.0, 21.0), np.zeros(20)]).astype(np.float32)))
     flat = np.array([model.act(demos.images[k], float(demos.speed[k]), straight)[0] for k in idx])
     label = demos.steer[idx]
@@ -75,6 +77,8 @@ def main() -> None:
     root = Path("results") / conf["region"]["name"] / "drive"
     demos = Demonstrations.load(root / "demonstrations.npz")
     val_routes = int(conf["drive"]["demonstrations"]["val_routes"])
+    if val_routes < 2:
+        raise SystemExit(f"drive.demonstrations.val_routes: {val_routes}; offline_steer.py needs at least 2")
     model = load_controller(args.controller or root / args.agent / "controller.ckpt", cls=CONTROLLERS[args.agent]).eval()
     routes = np.unique(demos.route)
     val = np.isin(demos.route, routes[len(routes) - val_routes:])

@@ -155,6 +155,7 @@ def test_topo_lp_image_dropout_hides_the_image_from_the_head_in_training_only(st
     """drive.train.image_dropout: the training samples it drops reach the head without their image features (the head
     must steer by the path); evaluation always sees the image; the setting survives the checkpoint."""
     drive, _ = straight
+    torch.manual_seed(0)
     model = build_model(drive | {"train": {**drive["train"], "image_dropout": 0.9}}, straight_demos, "lp")
     assert build_model(drive, straight_demos, "lp").hparams.image_dropout == 0.0
     assert "image_dropout" not in build_model(drive | {"train": {**drive["train"], "image_dropout": 0.9}},

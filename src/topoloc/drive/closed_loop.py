@@ -9,9 +9,10 @@ by a localization on the topometric map.
   It is *unsure* when no answer of the last ``lost_steps`` steps had a confidence of at least
   ``place.localize.threshold``; the agents then slow down to ``slow_mps`` (as the paper does while relocalizing).
 * **Speed limit from the map**: the teach drive's target speed at each map vertex, recorded from the expert's teach
-  drive of the route (the replay agent drives by it); with ``teach_speed_ahead_m`` every agent stays under the lowest of them from its localized vertex to that far
-  ahead (:func:`speed_limit_ahead`). The controllers predict their target speed from the image, and at 6 m/s a 5 m
-  radius junction turn is taken too fast; the map knows the teach drive slowed there.
+  drive of the route (the replay agent drives by it); with ``teach_speed_ahead_m`` every agent stays under the lowest
+  of them from its localized vertex to that far ahead (:func:`speed_limit_ahead`). The controllers predict their
+  target speed from the image, and at 6 m/s a 5 m radius junction turn is taken too fast; the map knows the teach
+  drive slowed there.
 * **Agents**: :class:`DLMAgent` (Topo-DLM: the image, the speed and the vertex's command), :class:`LPAgent`
   (Topo-LP: the image, the speed and the local path of the map from the vertex) and
   :class:`ReplayAgent` (the paper's baseline: the steering the expert used at that vertex in the teach drive,

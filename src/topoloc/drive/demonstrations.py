@@ -190,7 +190,8 @@ def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] |
                    stream: int = 41) -> DriveRoute:
     """Training route ``r``: the first of its seeded draws ``make_route(rng)`` that keeps ``min_steps`` recorded steps
     ``min_distance_m`` away from ``avoid_xy`` (the same route on every call: DAgger drives the demonstrations' routes;
-    another ``stream`` draws other routes the same way)."""
+    another ``stream`` draws other routes the same way). InputError naming ``drive.lane.max_shared_m`` when no draw
+    gave a route, ``drive.demonstrations.min_distance_m`` when none kept away from ``avoid_xy``."""
     drive = conf["drive"]
     demo_conf = drive["demonstrations"]
     every = int(demo_conf.get("record_every", 1))
@@ -207,7 +208,8 @@ def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] |
             return route
     if not drawn:
         raise InputError("drive.lane.max_shared_m", f"route {r} (seed stream {stream}): none of 20 draws gave a drivable "
-                         "route (each ran into a dead end or shared more lane with another road's carriageway)")
+                         "route (each shared more lane with another road's carriageway, ran into a dead end before "
+                         "half of drive.demonstrations.route_length_m, or could not be built)")
     raise InputError("drive.demonstrations.min_distance_m", f"route {r} (seed stream {stream}): no route keeps "
                      f"{demo_conf['min_steps']} steps {demo_conf['min_distance_m']} m away from the teach route")
 

@@ -5,6 +5,8 @@ The camera image goes through Topo-DLM's encoder (:class:`topoloc.drive.controll
 image (:mod:`topoloc.drive.local_path`, ``PATH_PX`` square, 0..255) through two strided convolutions (8 and 16
 channels) and a layer of 64 units; the speed through Topo-DLM's speed encoder. A joint layer and **one** head give
 (steer, target speed): the path says where to go, so there is no branch per command. Same losses as Topo-DLM.
+With ``image_dropout`` (``drive.train.image_dropout``) that share of the training samples reaches the joint layer
+with its image features zeroed, so the head must steer by the path and speed alone (the speed head still sees them).
 
 ``forward`` takes ``(N, C + 2, H, W)`` like Topo-DLM's, with the local-path image in the top-left
 ``PATH_PX`` x ``PATH_PX`` pixels of the last plane (in place of the command): the signature of the logged model.
@@ -34,7 +36,6 @@ class TopoLP(TopoDLM):
         super().__init__(**kwargs)
         if not 0.0 <= float(image_dropout) < 1.0:
             raise InputError("drive.train.image_dropout", f"must be in [0, 1), got {image_dropout}")
-        self.hparams["image_dropout"] = float(image_dropout)  # kept in the checkpoint with the parent's hparams
         self._image_generator: torch.Generator | None = None
         hidden, dropout = int(self.hparams.hidden), float(self.hparams.dropout)
         self.path_encoder = nn.Sequential(
@@ -49,7 +50,7 @@ class TopoLP(TopoDLM):
         feat = self.image_fc(torch.flatten(self.encoder(self._normalize(images)), 1))
         path = self.path_encoder(paths[:, None].float() / 255.0)
         seen = feat
-        p = float(self.hparams.get("image_dropout", 0.0))
+        p = float(self.hparams.image_dropout)
         if self.training and p > 0:  # whole samples without the image: the head must steer by the path too
             keep = torch.rand(len(feat), 1, device=feat.device, generator=self._dropout_generator(feat.device)) >= p
             seen = feat * keep

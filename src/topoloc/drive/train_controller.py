@@ -127,8 +127,8 @@ def build_model(drive: dict[str, Any], demos: Demonstrations, agent: str = "dlm"
     net, train = drive["network"], drive["train"]
     h, w, c = demos.images.shape[1:]
     extra = {"image_dropout": float(train.get("image_dropout", 0.0))} if agent == "lp" else {}
-    return CONTROLLERS[agent](**extra, in_channels=c, height=h, width=w, channels=list(net["channels"]), hidden=int(net["hidden"]),
-                   downsample=int(net["downsample"]),
+    return CONTROLLERS[agent](**extra, in_channels=c, height=h, width=w, channels=list(net["channels"]),
+                   hidden=int(net["hidden"]), downsample=int(net["downsample"]),
                    dropout=float(net["dropout"]), max_speed=float(drive["vehicle"]["max_speed_mps"]),
                    speed_gain=float(drive["expert"]["speed_gain"]), lr=float(train["lr"]),
                    weight_decay=float(train["weight_decay"]), steer_weight=float(train["steer_weight"]),
