@@ -34,14 +34,19 @@ def lane_map(route, step_m: float = 1.0) -> TopometricMap:
     return TopometricMap(np.zeros((len(s), 4), np.float32), np.zeros((len(s), 4), np.float32), xy, command, xy, "clear_noon")
 
 
-def test_replay_with_ground_truth_follows_the_teach_drive(town, town_graph):
+def right_turn(town, town_graph) -> tuple:
+    """The town's 175 m route with its right turn: drive and stage config, route, simulator, lane map, vertex arcs."""
     drive = drive_conf(follow={"start_lateral_m": 0.0, "start_yaw_deg": 0.0})
     conf = {"drive": drive, "place": make_config()["place"]}
     route = town_route(town_graph, "right", drive).cut(175.0)
     sim = Simulator(route, route_scene(town["osm"], town_graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
                     VehicleSpec.from_conf(drive), 100.0)
     topo = lane_map(route)
-    lane_s = vertex_lane_s(route, topo)
+    return drive, conf, route, sim, topo, vertex_lane_s(route, topo)
+
+
+def test_replay_with_ground_truth_follows_the_teach_drive(town, town_graph):
+    drive, conf, route, sim, topo, lane_s = right_turn(town, town_graph)
     assert np.allclose(lane_s[:-5], np.arange(len(lane_s) - 5), atol=0.2)
     expert = Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
     steer, speed = teach_controls(sim, expert, "clear_noon", 0, lane_s)
@@ -78,13 +83,7 @@ def test_speed_limit_ahead_is_the_slowest_teach_speed_in_reach():
 
 
 def test_the_map_speed_limit_holds_an_agent_that_never_slows_to_the_teach_speed(town, town_graph):
-    drive = drive_conf(follow={"start_lateral_m": 0.0, "start_yaw_deg": 0.0})
-    conf = {"drive": drive, "place": make_config()["place"]}
-    route = town_route(town_graph, "right", drive).cut(175.0)
-    sim = Simulator(route, route_scene(town["osm"], town_graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
-                    VehicleSpec.from_conf(drive), 100.0)
-    topo = lane_map(route)
-    lane_s = vertex_lane_s(route, topo)
+    drive, conf, route, sim, topo, lane_s = right_turn(town, town_graph)
     steer, speed = teach_controls(sim, Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"])),
                                   "clear_noon", 0, lane_s)
     limit = speed_limit_ahead(speed, lane_s, 10.0)
