@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import make_config
-from tests.drive.conftest import drive_conf, node_at, route_scene
+from tests.drive.conftest import drive_conf, node_at, route_scene, town_route
 from topoloc.drive.demonstrations import (
     LOCAL_PATH_M,
     Demonstrations,
@@ -16,6 +16,8 @@ from topoloc.drive.demonstrations import (
     local_path,
     record,
     route_conditions,
+    sharp_m,
+    training_route,
 )
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
 from topoloc.drive.lanes import build_route, plan_route
@@ -101,3 +103,23 @@ def test_the_local_path_goes_on_straight_past_the_routes_end(short_road):
     path = local_path(route, s, route.point(s), float(route.yaw[route.index(s)]))
     np.testing.assert_allclose(path[:, 0], np.arange(1.0, LOCAL_PATH_M + 1), atol=0.05)  # not piled up at the end
     np.testing.assert_allclose(path[:, 1], 0.0, atol=0.05)
+
+
+def test_candidates_keep_the_training_route_with_the_most_sharp_bends(town_graph):
+    """drive.demonstrations.candidates: of that many routes drawn (each keeping min_steps), the one with the most lane
+    in bends of under 15 m radius; one candidate is the first route drawn."""
+    drive = drive_conf(demonstrations={"min_steps": 20, "min_distance_m": 0})
+    conf = {"drive": drive}
+    straight, right = town_route(town_graph, "straight", drive), town_route(town_graph, "right", drive)
+    assert sharp_m(straight) == 0.0 and sharp_m(right) > 5.0
+    drawn = []
+
+    def make_route(rng):  # straight, the right turn, straight, ... (a dead end every third draw)
+        drawn.append(len(drawn))
+        return [straight, None, right][(len(drawn) - 1) % 3]
+
+    assert training_route(0, conf, None, make_route) is straight and len(drawn) == 1
+    drawn.clear()
+    assert training_route(0, conf, None, make_route, candidates=2) is right and len(drawn) == 3
+    drawn.clear()
+    assert training_route(0, conf, None, make_route, candidates=3) is right and len(drawn) == 4

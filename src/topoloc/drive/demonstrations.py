@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseInjector, NoiseSettings
-from topoloc.drive.lanes import DriveRoute
+from topoloc.drive.lanes import DENSE_M, DriveRoute, lane_curvature
 from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, VehicleState
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
@@ -38,6 +38,8 @@ log = logging.getLogger(__name__)
 LOCAL_PATH_M = 20
 #: Steps before a failure that are not kept (the expert was already losing the road).
 DROP_BEFORE_FAILURE = 20
+#: A bend of the lane tighter than this radius (metres) is sharp (``drive.demonstrations.candidates``).
+SHARP_RADIUS_M = 15.0
 
 
 def as_input(image: NDArray[np.uint8], color: bool) -> NDArray[np.uint8]:
@@ -186,18 +188,24 @@ def route_conditions(route: int, n: int, per_route: int | None) -> list[int]:
     return [(route + k) % n for k in range(int(per_route))]
 
 
+def sharp_m(route: DriveRoute) -> float:
+    """Metres of the route's lane in bends tighter than :data:`SHARP_RADIUS_M`."""
+    return float((lane_curvature(route.xy) > 1.0 / SHARP_RADIUS_M).sum()) * DENSE_M
+
+
 def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None, make_route: Any,
-                   stream: int = 41) -> DriveRoute:
-    """Training route ``r``: the first of its seeded draws ``make_route(rng)`` that keeps ``min_steps`` recorded steps
-    ``min_distance_m`` away from ``avoid_xy`` (the same route on every call: DAgger drives the demonstrations' routes;
-    another ``stream`` draws other routes the same way). InputError naming ``drive.lane.max_shared_m`` when no draw
-    gave a route, ``drive.demonstrations.min_distance_m`` when none kept away from ``avoid_xy``."""
+                   stream: int = 41, candidates: int = 1) -> DriveRoute:
+    """Training route ``r``: of its seeded draws ``make_route(rng)`` that keep ``min_steps`` recorded steps
+    ``min_distance_m`` away from ``avoid_xy``, the first ``candidates`` ones, and of those the one with the most lane
+    in sharp bends (:func:`sharp_m`; the same route on every call: DAgger drives the demonstrations' routes; another
+    ``stream`` draws other routes the same way). InputError naming ``drive.lane.max_shared_m`` when no draw gave a
+    route, ``drive.demonstrations.min_distance_m`` when none kept away from ``avoid_xy``."""
     drive = conf["drive"]
     demo_conf = drive["demonstrations"]
     every = int(demo_conf.get("record_every", 1))
     step_m = float(drive["expert"]["cruise_mps"]) / float(drive["episode"]["control_hz"])
-    drawn = 0
-    for attempt in range(20):
+    drawn, kept = 0, []
+    for attempt in range(20 * max(int(candidates), 1)):
         route = make_route(np.random.default_rng([int(drive["seed"]), stream, r, attempt]))
         if route is None:
             continue
@@ -205,7 +213,11 @@ def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] |
         near = polyline_distance(route.xy[::8], avoid_xy) < float(demo_conf["min_distance_m"]) if avoid_xy is not None \
             else np.zeros(len(route.xy[::8]), bool)
         if (1.0 - near.mean()) * route.length_m / step_m / every >= int(demo_conf["min_steps"]):
-            return route
+            kept.append(route)
+            if len(kept) >= candidates:
+                break
+    if kept:
+        return max(kept, key=sharp_m)  # the first of equals: one candidate gives the first route kept
     if not drawn:
         raise InputError("drive.lane.max_shared_m", f"route {r} (seed stream {stream}): none of 20 draws gave a drivable "
                          "route (each shared more lane with another road's carriageway, ran into a dead end before "
@@ -234,7 +246,7 @@ def demonstrate(osm: str | None, graph: RoadGraph, conf: dict[str, Any], avoid_x
     side = SideViews(int(demo_conf["side_views"]), float(demo_conf["side_lateral_m"]), float(demo_conf["side_yaw_deg"]))
     parts, outcomes, injected = [], [], []
     for r in tqdm(range(int(demo_conf["routes"])), desc="demonstration routes", unit="route"):
-        chosen = training_route(r, conf, avoid_xy, make_route)
+        chosen = training_route(r, conf, avoid_xy, make_route, candidates=int(demo_conf["candidates"]))
         sim = make_simulator(chosen)
         expert = Expert(chosen, sim.spec, settings)
         for c in route_conditions(r, len(conditions), demo_conf.get("conditions_per_route")):
