@@ -220,8 +220,8 @@ def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] |
     if kept:
         return max(kept, key=sharp_m)  # the first of equals: one candidate gives the first route kept
     if not drawn:
-        raise InputError("drive.lane.max_shared_m", f"route {r} (seed stream {stream}): none of {attempts} draws gave a drivable "
-                         "route (each shared more lane with another road's carriageway, ran into a dead end before "
+        raise InputError("drive.lane.max_shared_m", f"route {r} (seed stream {stream}): none of {attempts} draws gave "
+                         "a drivable route (each shared more lane with another road's carriageway, ran into a dead end before "
                          "half of drive.demonstrations.route_length_m, or could not be built)")
     raise InputError("drive.demonstrations.min_distance_m", f"route {r} (seed stream {stream}): no route keeps "
                      f"{demo_conf['min_steps']} steps {demo_conf['min_distance_m']} m away from the teach route")
