@@ -22,9 +22,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import yaml
 
-from topoloc.config import deep_merge, load
+from topoloc.config import load_layered
 from topoloc.drive.controller import TopoDLM, load_controller
 from topoloc.drive.demonstrations import as_input, training_route
 from topoloc.drive.expert import Expert, ExpertSettings
@@ -73,10 +72,7 @@ def main() -> None:
     parser.add_argument("--controller", type=Path, help="checkpoint (default: the region's own)")
     parser.add_argument("--routes", type=int, help="check routes (default: drive.check.routes)")
     args = parser.parse_args()
-    extra: dict = {}
-    for path in args.also:
-        extra = deep_merge(extra, yaml.safe_load(Path(path).read_text()) or {})
-    conf = load(Path(args.config), overrides=extra)
+    conf = load_layered(args.config, args.also)
     torch.set_num_threads(1)
     root = Path("results") / conf["region"]["name"]
     graph = RoadGraph.load(root / "graph" / "graph.graphml")

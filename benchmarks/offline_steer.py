@@ -23,9 +23,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import yaml
 
-from topoloc.config import deep_merge, load
+from topoloc.config import load_layered
 from topoloc.drive.controller import TopoDLM, load_controller
 from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.local_path import lane_frame_path, raster
@@ -70,10 +69,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=600, help="steps drawn per half (hard, easy) and set")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    extra: dict = {}
-    for path in args.also:
-        extra = deep_merge(extra, yaml.safe_load(Path(path).read_text()) or {})
-    conf = load(Path(args.config), overrides=extra)
+    conf = load_layered(args.config, args.also)
     root = Path("results") / conf["region"]["name"] / "drive"
     demos = Demonstrations.load(root / "demonstrations.npz")
     val_routes = int(conf["drive"]["demonstrations"]["val_routes"])

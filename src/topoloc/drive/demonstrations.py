@@ -205,7 +205,7 @@ def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] |
     every = int(demo_conf.get("record_every", 1))
     step_m = float(drive["expert"]["cruise_mps"]) / float(drive["episode"]["control_hz"])
     drawn, kept = 0, []
-    attempts = 20 * max(int(candidates), 1)
+    attempts = 20 * int(candidates)
     for attempt in range(attempts):
         route = make_route(np.random.default_rng([int(drive["seed"]), stream, r, attempt]))
         if route is None:
@@ -221,8 +221,8 @@ def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] |
         return max(kept, key=sharp_m)  # the first of equals: one candidate gives the first route kept
     if not drawn:
         raise InputError("drive.lane.max_shared_m", f"route {r} (seed stream {stream}): none of {attempts} draws gave "
-                         "a drivable route (each shared more lane with another road's carriageway, ran into a dead end before "
-                         "half of drive.demonstrations.route_length_m, or could not be built)")
+                         "a drivable route (each shared more lane with another road's carriageway, ran into a dead "
+                         "end before half of drive.demonstrations.route_length_m, or could not be built)")
     raise InputError("drive.demonstrations.min_distance_m", f"route {r} (seed stream {stream}): no route keeps "
                      f"{demo_conf['min_steps']} steps {demo_conf['min_distance_m']} m away from the teach route")
 

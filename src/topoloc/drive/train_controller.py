@@ -126,7 +126,7 @@ def build_model(drive: dict[str, Any], demos: Demonstrations, agent: str = "dlm"
     shaped like ``demos``'."""
     net, train = drive["network"], drive["train"]
     h, w, c = demos.images.shape[1:]
-    extra = {"image_dropout": float(train.get("image_dropout", 0.0))} if agent == "lp" else {}
+    extra = {"image_dropout": float(train["image_dropout"])} if agent == "lp" else {}
     return CONTROLLERS[agent](**extra, in_channels=c, height=h, width=w, channels=list(net["channels"]),
                    hidden=int(net["hidden"]), downsample=int(net["downsample"]),
                    dropout=float(net["dropout"]), max_speed=float(drive["vehicle"]["max_speed_mps"]),
