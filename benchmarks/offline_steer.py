@@ -27,7 +27,7 @@ import torch
 from topoloc.config import load_layered
 from topoloc.drive.controller import TopoDLM, load_controller
 from topoloc.drive.demonstrations import Demonstrations
-from topoloc.drive.local_path import lane_frame_path, raster
+from topoloc.drive.local_path import lane_frame_path, path_plane
 from topoloc.drive.topo_lp import CONTROLLERS
 
 BINS = [(0.0, 0.1), (0.1, 0.3), (0.3, 0.5), (0.5, 0.8), (0.8, 1.01)]
@@ -40,7 +40,7 @@ def predictions(model: TopoDLM, agent: str, demos: Demonstrations, idx: np.ndarr
     out = []
     for i, k in enumerate(idx):
         if agent == "lp":
-            told = raster(lane_frame_path(demos.path[k if paths is None else paths[i]]))
+            told = path_plane(lane_frame_path(demos.path[k if paths is None else paths[i]]))
         else:
             told = int(demos.command[k])
         out.append(model.act(demos.images[k], float(demos.speed[k]), told)[0])
@@ -52,7 +52,7 @@ def path_effect(model: TopoDLM, demos: Demonstrations, idx: np.ndarray, rng: np.
     own = predictions(model, "lp", demos, idx)
     swap = np.array([rng.choice(idx[demos.route[idx] != demos.route[k]]) for k in idx])  # another route's step
     other = predictions(model, "lp", demos, idx, swap)
-    straight = raster(lane_frame_path(np.column_stack([np.arange(1.0, 21.0), np.zeros(20)]).astype(np.float32)))
+    straight = path_plane(lane_frame_path(np.column_stack([np.arange(1.0, 21.0), np.zeros(20)]).astype(np.float32)))
     flat = np.array([model.act(demos.images[k], float(demos.speed[k]), straight)[0] for k in idx])
     label = demos.steer[idx]
     return (f"local path, {len(idx)} validation steps: mean |change| of the steering with another step's path "

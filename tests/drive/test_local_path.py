@@ -5,7 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from topoloc.drive.local_path import PATH_PX, lane_frame_path, map_path, raster
+from topoloc.drive.local_path import (
+    PATH_PX,
+    PLANE_POINTS,
+    lane_frame_path,
+    map_path,
+    path_plane,
+    raster,
+)
 
 
 def _arc(radius: float, n: int = 40) -> np.ndarray:
@@ -50,3 +57,12 @@ def test_training_noise_moves_the_path():
     np.testing.assert_allclose(ahead[:17], map_path(road, 4)[:17], atol=0.05)  # beyond the 20 m recorded: straight on
     turned = lane_frame_path(vehicle, yaw_rad=np.radians(5.0))  # the frame turned left: the path seen 5 deg right
     assert np.isclose(np.degrees(np.arctan2(turned[2, 1], turned[2, 0])), -5.0, atol=1e-6)
+
+
+def test_the_plane_holds_the_image_and_the_points_ahead():
+    points = map_path(_arc(8.0), 5)
+    plane = path_plane(points)
+    assert plane.shape == (PATH_PX + 1, PATH_PX) and plane.dtype == np.float32
+    np.testing.assert_array_equal(plane[:PATH_PX], raster(points))
+    np.testing.assert_allclose(plane[PATH_PX].reshape(-1, 2), points[1:PLANE_POINTS + 1], atol=1e-5)
+    assert plane[PATH_PX, 2 * 15 + 1] > 3.0  # 16 m ahead, 11 m into the left bend of 8 m radius

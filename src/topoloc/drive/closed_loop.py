@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from topoloc.drive.demonstrations import as_input
 from topoloc.drive.expert import Expert
 from topoloc.drive.lanes import DriveRoute
-from topoloc.drive.local_path import map_path, raster
+from topoloc.drive.local_path import map_path, path_plane
 from topoloc.drive.simulator import RUNNING, Control, Simulator
 from topoloc.errors import InputError
 from topoloc.localizer import Localizer
@@ -194,11 +194,11 @@ class LPAgent:
 
     def __init__(self, model: Any, topo: TopometricMap) -> None:
         self.model, self.topo = model, topo
-        self._paths: dict[int, NDArray[np.uint8]] = {}
+        self._paths: dict[int, NDArray[np.float32]] = {}
 
     def act(self, image: NDArray[np.uint8], speed: float, vertex: int) -> Control:
         if vertex not in self._paths:
-            self._paths[vertex] = raster(map_path(self.topo.xy, vertex))
+            self._paths[vertex] = path_plane(map_path(self.topo.xy, vertex))
         return Control(*self.model.act(image, speed, self._paths[vertex]))
 
 

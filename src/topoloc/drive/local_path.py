@@ -10,6 +10,9 @@
   paper adds to the path in training.
 * **Raster** (:func:`raster`): ``PATH_PX`` x ``PATH_PX`` pixels, ``PATH_AHEAD_M`` metres ahead (bottom row: the
   reference point) and half that to either side, the path drawn as a one-pixel anti-aliased line.
+* **Plane** (:func:`path_plane`): what Topo-LP is told, ``PATH_PX + 1`` rows of ``PATH_PX``: the raster on top and,
+  in the last row, the path's points 1, 2, ... ``PATH_PX // 2`` m ahead as numbers (x, y in metres, in turn), which a
+  Topo-LP with ``path_prior`` reads as its lane points before the image's correction.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from numpy.typing import NDArray
 
 PATH_PX = 32
 PATH_AHEAD_M = 20.0  # as far as the demonstrations record the lane (LOCAL_PATH_M)
+PLANE_POINTS = PATH_PX // 2  # the points 1 .. 16 m ahead fill the plane's last row
 _STEP_M = 1.0
 
 
@@ -73,3 +77,12 @@ def raster(points: NDArray[np.float64]) -> NDArray[np.uint8]:
     pixels = np.round(np.column_stack([cols, rows]) * 16).astype(np.int32)  # 4 fractional bits
     cv2.polylines(image, [pixels], False, 255, 1, cv2.LINE_AA, shift=4)
     return image
+
+
+def path_plane(points: NDArray[np.float64]) -> NDArray[np.float32]:
+    """Topo-LP's input of a path (frame coordinates, metres, every metre from the reference point): its raster in the
+    top ``PATH_PX`` rows, its points 1 .. :data:`PLANE_POINTS` m ahead in the last row (see the module docstring)."""
+    plane = np.zeros((PATH_PX + 1, PATH_PX), np.float32)
+    plane[:PATH_PX] = raster(points)
+    plane[PATH_PX] = np.asarray(points, np.float32)[1:PLANE_POINTS + 1].reshape(-1)
+    return plane

@@ -46,7 +46,7 @@ from topoloc.drive.demonstrations import (
 )
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.lanes import DriveRoute
-from topoloc.drive.local_path import lane_frame_path, raster
+from topoloc.drive.local_path import lane_frame_path, path_plane
 from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, step_vehicle
 from topoloc.errors import InputError
 
@@ -76,9 +76,9 @@ class DaggerSettings:
 
 
 def controller_input(agent: str, route: DriveRoute, s: float, centre: NDArray[np.float64], yaw: float) -> Any:
-    """What controller ``agent`` is told at arc length ``s``: Topo-DLM the command index, Topo-LP the local-path image."""
+    """What controller ``agent`` is told at arc length ``s``: Topo-DLM the command index, Topo-LP the local-path plane."""
     if agent == "lp":
-        return raster(lane_frame_path(local_path(route, s, centre, yaw)))
+        return path_plane(lane_frame_path(local_path(route, s, centre, yaw)))
     return int(route.command_at(s))
 
 

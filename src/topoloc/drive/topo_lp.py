@@ -7,9 +7,14 @@ channels) and a layer of 64 units; the speed through Topo-DLM's speed encoder. A
 (steer, target speed): the path says where to go, so there is no branch per command. Same losses as Topo-DLM.
 With ``image_dropout`` (``drive.train.image_dropout``) that share of the training samples reaches the joint layer
 with its image features zeroed, so the head must steer by the path and speed alone (the speed head still sees them).
+With ``path_prior`` (``drive.network.path_prior``, the ``waypoints`` output only; a deviation from the paper) the
+head gives a correction to the lane points: they are the local path's own points at the waypoint arcs plus the head's
+output, so a path that bends hard turns the wheel hard before the network has learnt anything, and the image says
+how far the vehicle is off the path (its offset from the teach drive, the localization's error along the path).
 
-``forward`` takes ``(N, C + 2, H, W)`` like Topo-DLM's, with the local-path image in the top-left
-``PATH_PX`` x ``PATH_PX`` pixels of the last plane (in place of the command): the signature of the logged model.
+``forward`` takes ``(N, C + 2, H, W)`` like Topo-DLM's, with the local-path plane
+(:func:`topoloc.drive.local_path.path_plane`: the path image, then its points) in the top-left
+``PATH_PX + 1`` x ``PATH_PX`` pixels of the last plane (in place of the command): the signature of the logged model.
 :meth:`TopoLP.act` is the closed-loop call.
 """
 
@@ -22,8 +27,8 @@ import torch
 from numpy.typing import NDArray
 from torch import nn
 
-from topoloc.drive.controller import TopoDLM
-from topoloc.drive.local_path import PATH_PX
+from topoloc.drive.controller import WAYPOINT_ARCS, WAYPOINT_SCALE_M, TopoDLM
+from topoloc.drive.local_path import PATH_PX, PLANE_POINTS
 from topoloc.errors import InputError
 
 PATH_FEATURES = 64
@@ -32,10 +37,16 @@ PATH_FEATURES = 64
 class TopoLP(TopoDLM):
     """The local-path controller of the module docstring (Topo-DLM's encoders, a path encoder, one head)."""
 
-    def __init__(self, image_dropout: float = 0.0, **kwargs: Any) -> None:
+    def __init__(self, image_dropout: float = 0.0, path_prior: bool = False, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         if not 0.0 <= float(image_dropout) < 1.0:
             raise InputError("drive.train.image_dropout", f"must be in [0, 1), got {image_dropout}")
+        if path_prior and self.hparams.output != "waypoints":
+            raise InputError("drive.network.path_prior", "needs the waypoints output (drive.network.output.lp: waypoints), "
+                             f"not {self.hparams.output}")
+        if int(self.hparams.height) <= PATH_PX or int(self.hparams.width) < PATH_PX:
+            raise InputError("place.image", f"Topo-LP needs images of at least {PATH_PX} x {PATH_PX + 1} pixels for its "
+                             f"local-path plane, not {self.hparams.width} x {self.hparams.height}")
         self._image_generator: torch.Generator | None = None
         hidden, dropout = int(self.hparams.hidden), float(self.hparams.dropout)
         self.path_encoder = nn.Sequential(
@@ -46,16 +57,22 @@ class TopoLP(TopoDLM):
                                                      nn.Dropout(dropout), nn.Linear(hidden // 2, self.n_outputs))])
 
     def _lp_heads(self, images: torch.Tensor, speed: torch.Tensor, paths: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """The head's outputs ``(N, n_outputs)`` and the speed prediction of shrunk images and path images (N, P, P)."""
+        """The head's outputs ``(N, n_outputs)`` and the speed prediction of shrunk images and path planes
+        (N, P + 1, P): :func:`topoloc.drive.local_path.path_plane`."""
         feat = self.image_fc(torch.flatten(self.encoder(self._normalize(images)), 1))
-        path = self.path_encoder(paths[:, None].float() / 255.0)
+        path = self.path_encoder(paths[:, None, :PATH_PX].float() / 255.0)
         seen = feat
         p = float(self.hparams.image_dropout)
         if self.training and p > 0:  # whole samples without the image: the head must steer by the path too
             keep = torch.rand(len(feat), 1, device=feat.device, generator=self._dropout_generator(feat.device)) >= p
             seen = feat * keep
         joint = self.joint(torch.cat([seen, self.speed_fc(speed[:, None] / self.hparams.max_speed), path], dim=1))
-        return self.branches[0](joint), self.speed_head(feat)[:, 0]
+        out = self.branches[0](joint)
+        if self.hparams.get("path_prior", False):  # the head corrects the path's own lane points
+            points = paths[:, PATH_PX, : 2 * PLANE_POINTS].float().reshape(len(paths), PLANE_POINTS, 2)
+            prior = points[:, [int(a) - 1 for a in WAYPOINT_ARCS]].reshape(len(paths), -1) / WAYPOINT_SCALE_M
+            out = out + torch.cat([prior, torch.zeros_like(out[:, -1:])], dim=1)
+        return out, self.speed_head(feat)[:, 0]
 
     def _dropout_generator(self, device: torch.device) -> torch.Generator:
         if self._image_generator is None:
@@ -66,13 +83,14 @@ class TopoLP(TopoDLM):
         """(steer, target speed m/s) ``(N, 2)`` of ``(N, C + 2, H, W)``: image, speed plane, path plane (module docstring)."""
         c = int(self.hparams.in_channels)
         speed = inputs[:, c, 0, 0].float()
-        out, _ = self._lp_heads(self._shrink(inputs[:, :c].float()), speed, inputs[:, c + 1, :PATH_PX, :PATH_PX])
+        out, _ = self._lp_heads(self._shrink(inputs[:, :c].float()), speed, inputs[:, c + 1, : PATH_PX + 1, :PATH_PX])
         steer, target = self._control(out, speed)
         return torch.stack([steer, target * self.hparams.max_speed], dim=1)
 
     @torch.no_grad()
     def act(self, image: NDArray[np.uint8], speed: float, path: NDArray[np.uint8]) -> tuple[float, float]:  # type: ignore[override]
-        """Steer and throttle for one camera image (H, W, C) uint8, the speed (m/s) and a local-path image."""
+        """Steer and throttle for one camera image (H, W, C) uint8, the speed (m/s) and a local-path plane
+        (:func:`topoloc.drive.local_path.path_plane`)."""
         self.eval()
         x = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
         v = torch.tensor([float(speed)])
@@ -83,7 +101,7 @@ class TopoLP(TopoDLM):
         return float(np.clip(steer, -1.0, 1.0)), float(np.clip(throttle, -1.0, 1.0))
 
     def _outputs(self, x: torch.Tensor, speed: torch.Tensor, condition: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """The head's output and speed prediction of a batch (``condition``: the path images)."""
+        """The head's output and speed prediction of a batch (``condition``: the path planes)."""
         return self._lp_heads(x, speed, condition)
 
 

@@ -29,7 +29,7 @@ from torch.utils.data import DataLoader, Dataset, TensorDataset, WeightedRandomS
 
 from topoloc.drive.controller import AGENT_NAMES, TopoDLM, waypoint_targets
 from topoloc.drive.demonstrations import Demonstrations
-from topoloc.drive.local_path import lane_frame_path, raster
+from topoloc.drive.local_path import lane_frame_path, path_plane
 from topoloc.drive.on_policy import DaggerSettings, closed_loop_check, collect
 from topoloc.drive.plot import training_figure
 from topoloc.drive.routes import make_simulator, random_drive_route, teach_route
@@ -78,7 +78,7 @@ class PathSteps(Dataset):
         rng = np.random.default_rng([self.seed, 61, i]) if self.fixed else self.rng
         shift = float(rng.normal(0.0, self.shift_m)) if self.shift_m else 0.0
         turn = float(rng.normal(0.0, self.yaw)) if self.yaw else 0.0
-        path = raster(lane_frame_path(self.demos.path[k], shift, turn))
+        path = path_plane(lane_frame_path(self.demos.path[k], shift, turn))
         return (torch.from_numpy(self.demos.images[k]), torch.tensor(self.demos.speed[k]), torch.from_numpy(path),
                 torch.from_numpy(self.target[i]))
 
@@ -126,7 +126,7 @@ def build_model(drive: dict[str, Any], demos: Demonstrations, agent: str = "dlm"
     shaped like ``demos``'."""
     net, train = drive["network"], drive["train"]
     h, w, c = demos.images.shape[1:]
-    extra = {"image_dropout": float(train["image_dropout"])} if agent == "lp" else {}
+    extra = {"image_dropout": float(train["image_dropout"]), "path_prior": bool(net["path_prior"])} if agent == "lp" else {}
     return CONTROLLERS[agent](**extra, in_channels=c, height=h, width=w, channels=list(net["channels"]),
                    hidden=int(net["hidden"]), downsample=int(net["downsample"]),
                    dropout=float(net["dropout"]), max_speed=float(drive["vehicle"]["max_speed_mps"]),
@@ -140,14 +140,14 @@ def build_model(drive: dict[str, Any], demos: Demonstrations, agent: str = "dlm"
 
 def signature_example(demos: Demonstrations, agent: str = "dlm") -> np.ndarray:
     """Two steps as the logged model's input ``(2, C + 2, H, W)`` float32: image, speed plane, command plane (Topo-DLM)
-    or local-path plane (Topo-LP: the path image in its top-left corner)."""
+    or local-path plane (Topo-LP: :func:`topoloc.drive.local_path.path_plane` in its top-left corner)."""
     images = demos.images[:2].astype(np.float32).transpose(0, 3, 1, 2)
     planes = np.ones((len(images), 2, *images.shape[2:]), np.float32)
     planes[:, 0] *= demos.speed[:2, None, None]
     if agent == "lp":
         planes[:, 1] = 0.0
         for i in range(len(images)):
-            path = raster(lane_frame_path(demos.path[i]))[: images.shape[2], : images.shape[3]]
+            path = path_plane(lane_frame_path(demos.path[i]))[: images.shape[2], : images.shape[3]]
             planes[i, 1, : path.shape[0], : path.shape[1]] = path
     else:
         planes[:, 1] *= demos.command[:2, None, None]
