@@ -206,6 +206,8 @@ def test_a_path_prior_topo_lp_turns_by_its_path_before_it_has_learnt_anything(st
     assert steering[True][0] == pytest.approx(expected, abs=0.01)
     assert abs(steering[True][1]) < 0.01
     assert steering[False] == [0.0, 0.0]  # without the prior, a silent head's lane points are all at the vehicle
+    with pytest.raises(ValueError, match="path_plane"):
+        model.act(image, 3.0, raster(bend))  # the image alone: no points to start from
     with pytest.raises(InputError, match="drive.network.path_prior"):
         build_model(drive | {"network": {**drive["network"], "path_prior": True}}, straight_demos, "lp")
 

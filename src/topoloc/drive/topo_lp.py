@@ -69,6 +69,9 @@ class TopoLP(TopoDLM):
         joint = self.joint(torch.cat([seen, self.speed_fc(speed[:, None] / self.hparams.max_speed), path], dim=1))
         out = self.branches[0](joint)
         if self.hparams.get("path_prior", False):  # the head corrects the path's own lane points
+            if paths.shape[1] <= PATH_PX:
+                raise ValueError("a Topo-LP with path_prior is told the local-path plane (local_path.path_plane: the "
+                                 "image and the path's points), not the path image alone")
             points = paths[:, PATH_PX, : 2 * PLANE_POINTS].float().reshape(len(paths), PLANE_POINTS, 2)
             prior = points[:, [int(a) - 1 for a in WAYPOINT_ARCS]].reshape(len(paths), -1) / WAYPOINT_SCALE_M
             out = out + torch.cat([prior, torch.zeros_like(out[:, -1:])], dim=1)
