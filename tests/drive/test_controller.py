@@ -182,6 +182,8 @@ def test_topo_lp_image_dropout_hides_the_image_from_the_head_in_training_only(st
     assert load_controller(path, cls=TopoLP).hparams.image_dropout == 0.9
     with pytest.raises(InputError, match="drive.train.image_dropout"):
         TopoLP(image_dropout=1.0)
+    with pytest.raises(InputError, match="place.image"):
+        TopoLP(height=32, width=64)  # no row left for the local-path plane's points
 
 
 def test_a_path_prior_topo_lp_turns_by_its_path_before_it_has_learnt_anything(straight, straight_demos):
