@@ -1,0 +1,128 @@
+"""One controller config over several training seeds: the closed-loop check and teach and repeat, one row per seed.
+
+A success rate of the teach route moves with one hard turn taken or missed, and which turns a controller takes moves
+with its training seed. This script trains the same controller (``train_controller.run``, the check included) once
+per seed on the training region's demonstrations, drives the test region's teach route with each
+(``follow_route.run``, the controller alone beside nothing), and prints one row per seed and the mean over seeds.
+
+Usage (after the paper-sized run built the training region's demonstrations and the test region's topometric map;
+see the README, "Route following")::
+
+    PYTHONPATH=src python benchmarks/drive_seeds.py --agent lp --seeds 0 1 2 3 4 \\
+        --train config/config.yaml --test config/kitti00.yaml --also config/drive_paper.yaml
+
+Everything is written under ``--out`` (default ``results/seeds/<train region>-<test region>/<agent>``), one folder
+per seed; a seed whose checkpoint or teach-and-repeat metrics are already there is not run again, so a killed run
+picks up where it stopped. The test region uses the training region's retrieval network and controller (the
+paper's protocol, ``config/drive_transfer.yaml``); with ``--test`` the same as ``--train`` it is the training
+region's own teach route.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from topoloc.config import deep_merge, load_layered
+from topoloc.drive import follow_route, train_controller
+
+
+def osm_input(region: str) -> str:
+    """The region's downloaded OSM file (``download_osm``'s output, .osm or .osm.pbf)."""
+    found = sorted(p for p in (Path("results") / region / "osm").glob("region.osm*") if p.suffix != ".json")
+    if not found:
+        raise SystemExit(f"results/{region}/osm: no region.osm or region.osm.pbf (run the pipeline for {region} first)")
+    return str(found[0])
+
+
+def require(path: Path, made_by: str) -> str:
+    """``path`` as a string; one line naming it and the rule that makes it when it is missing."""
+    if not path.exists():
+        raise SystemExit(f"{path}: missing (made by the rule {made_by}; run the paper-sized pipeline first)")
+    return str(path)
+
+
+def train_seed(conf: dict[str, Any], agent: str, seed: int, out: Path) -> dict[str, float]:
+    """Train ``agent`` with ``drive.train.seed = seed`` (and its check) into ``out``, unless already there."""
+    metrics = out / "metrics.json"
+    if (out / "controller.ckpt").exists() and metrics.exists():
+        return json.loads(metrics.read_text())
+    region = conf["region"]["name"]
+    conf = deep_merge(conf, {"controller": agent, "drive": {"train": {"seed": seed, "log_model": False}}})
+    inputs = {"demonstrations": require(Path("results") / region / "drive" / "demonstrations.npz", "simulate_demonstrations"),
+              "graph": require(Path("results") / region / "graph" / "graph.graphml", "build_graph"),
+              "osm": osm_input(region)}
+    outputs = {"model": out / "controller.ckpt", "history": out / "history.csv", "metrics": metrics,
+               "figure": out / "training.png"}
+    return train_controller.run(conf, inputs, {k: str(v) for k, v in outputs.items()})
+
+
+def follow_seed(conf: dict[str, Any], agent: str, controller: Path, retrieval: str, out: Path) -> dict[str, float]:
+    """Drive the teach route of ``conf``'s region with ``controller`` alone (``follow_route.run``) into ``out``."""
+    metrics = out / "metrics.json"
+    if metrics.exists():
+        return json.loads(metrics.read_text())
+    region = conf["region"]["name"]
+    conf = deep_merge(conf, {"drive": {"follow": {"agents": [agent]}}})
+    root = Path("results") / region
+    inputs = {"osm": osm_input(region), "graph": require(root / "graph" / "graph.graphml", "build_graph"),
+              f"controller_{agent}": str(controller), "model": retrieval,
+              "map": require(root / "topometric_map" / "map.npz", "build_topometric_map")}
+    out.mkdir(parents=True, exist_ok=True)
+    names = {"episodes": "episodes.csv", "summary": "summary.csv", "metrics": "metrics.json", "table": "tables.md",
+             "paths": "paths.png", "success": "success.png", "strip": "strip.png"}
+    return follow_route.run(conf, inputs, {k: str(out / v) for k, v in names.items()})
+
+
+def table(rows: list[dict[str, Any]], agent: str, localizations: list[str], conditions: list[str]) -> str:
+    """Markdown: per seed, the check's success rate and, per localization, the teach route's mean, worst condition and
+    each condition; then the mean over the seeds."""
+    head = ["seed", "check"] + [f"{loc} {c}" for loc in localizations for c in ["mean", "min", *conditions]]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    values = []
+    for row in rows:
+        v = [row["train"].get("check/success_rate", np.nan)]
+        v += [row["follow"].get(f"{agent}_{loc}_success_{c}", np.nan) for loc in localizations
+              for c in ["mean", "min", *conditions]]
+        values.append(v)
+        lines.append(f"| {row['seed']} | " + " | ".join(f"{x:.2f}" for x in v) + " |")
+    lines.append("| **mean** | " + " | ".join(f"**{x:.2f}**" for x in np.nanmean(values, axis=0)) + " |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--agent", choices=["dlm", "lp"], default="lp")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--train", default="config/config.yaml", help="the training region's config")
+    parser.add_argument("--test", default="config/kitti00.yaml", help="the config of the region whose teach route is driven")
+    parser.add_argument("--also", nargs="*", default=["config/drive_paper.yaml"],
+                        help="config files merged over both (later ones win)")
+    parser.add_argument("--out", type=Path, help="output folder (default results/seeds/<train>-<test>/<agent>)")
+    args = parser.parse_args()
+    train_conf, test_conf = load_layered(args.train, args.also), load_layered(args.test, args.also)
+    train_region, test_region = train_conf["region"]["name"], test_conf["region"]["name"]
+    out = args.out or Path("results") / "seeds" / f"{train_region}-{test_region}" / args.agent
+    retrieval = require(Path("results") / train_region / "retrieval" / "model.ckpt", "train_retrieval")
+    rows = []
+    for seed in args.seeds:
+        here = out / f"seed{seed}"
+        trained = train_seed(train_conf, args.agent, seed, here / "train")
+        followed = follow_seed(test_conf, args.agent, here / "train" / "controller.ckpt", retrieval, here / "follow")
+        rows.append({"seed": seed, "train": trained, "follow": followed})
+        print(f"seed {seed}: check {trained.get('check/success_rate', float('nan')):.2f}, " + ", ".join(
+            f"{k.removeprefix(args.agent + '_')} {v:.2f}" for k, v in followed.items() if k.endswith("_success_mean")),
+            flush=True)
+    follow = test_conf["drive"]["follow"]
+    report = table(rows, args.agent, [str(n) for n in follow["localization"]],
+                   [str(c) for c in test_conf["place"]["repeat_conditions"]])
+    (out / "seeds.md").write_text(report + "\n")
+    print(report)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,40 @@
+"""The seed table of benchmarks/drive_seeds.py, and its one-line errors on missing pipeline outputs."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "drive_seeds.py"
+
+
+@pytest.fixture(scope="module")
+def drive_seeds():
+    spec = importlib.util.spec_from_file_location("drive_seeds", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_table_rows_per_seed_and_their_mean(drive_seeds) -> None:
+    rows = [{"seed": 0, "train": {"check/success_rate": 0.6},
+             "follow": {"lp_place_loop_success_mean": 0.9, "lp_place_loop_success_min": 0.8,
+                        "lp_place_loop_success_fog": 0.8, "lp_place_loop_success_night": 1.0}},
+            {"seed": 3, "train": {"check/success_rate": 0.7},
+             "follow": {"lp_place_loop_success_mean": 0.5, "lp_place_loop_success_min": 0.2,
+                        "lp_place_loop_success_fog": 0.8, "lp_place_loop_success_night": 0.2}}]
+    lines = drive_seeds.table(rows, "lp", ["place_loop"], ["fog", "night"]).splitlines()
+    assert lines[0] == "| seed | check | place_loop mean | place_loop min | place_loop fog | place_loop night |"
+    assert lines[2] == "| 0 | 0.60 | 0.90 | 0.80 | 0.80 | 1.00 |"
+    assert lines[3] == "| 3 | 0.70 | 0.50 | 0.20 | 0.80 | 0.20 |"
+    assert lines[4] == "| **mean** | **0.65** | **0.70** | **0.50** | **0.80** | **0.60** |"
+
+
+def test_missing_pipeline_output_is_one_line_naming_it(drive_seeds, tmp_path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit, match=r"results/nowhere/osm: no region.osm"):
+        drive_seeds.osm_input("nowhere")
+    with pytest.raises(SystemExit, match=r"map.npz: missing \(made by the rule build_topometric_map"):
+        drive_seeds.require(tmp_path / "map.npz", "build_topometric_map")
