@@ -78,16 +78,15 @@ def follow_seed(conf: dict[str, Any], agent: str, controller: Path, retrieval: s
     return follow_route.run(conf, inputs, {k: str(out / v) for k, v in names.items()})
 
 
-def table(rows: list[dict[str, Any]], agent: str, localizations: list[str], conditions: list[str]) -> str:
-    """Markdown: per seed, the check's success rate and, per localization, the teach route's mean, worst condition and
-    each condition; then the mean over the seeds."""
-    head = ["seed", "check"] + [f"{loc} {c}" for loc in localizations for c in ["mean", "min", *conditions]]
+def table(rows: list[dict[str, Any]], agent: str, localizations: list[str], columns: list[str]) -> str:
+    """Markdown: per seed, the check's success rate and, per localization, the teach route's success ``columns``
+    (suffixes of ``follow_route``'s metrics: ``mean``, ``min``, a condition, ``route<k>``); then the mean over seeds."""
+    head = ["seed", "check"] + [f"{loc} {c}" for loc in localizations for c in columns]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     values = []
     for row in rows:
         v = [row["train"].get("check/success_rate", np.nan)]
-        v += [row["follow"].get(f"{agent}_{loc}_success_{c}", np.nan) for loc in localizations
-              for c in ["mean", "min", *conditions]]
+        v += [row["follow"].get(f"{agent}_{loc}_success_{c}", np.nan) for loc in localizations for c in columns]
         values.append(v)
         lines.append(f"| {row['seed']} | " + " | ".join(f"{x:.2f}" for x in v) + " |")
     lines.append("| **mean** | " + " | ".join(f"**{x:.2f}**" for x in np.nanmean(values, axis=0)) + " |")
@@ -117,9 +116,12 @@ def main() -> None:
         print(f"seed {seed}: check {trained.get('check/success_rate', float('nan')):.2f}, " + ", ".join(
             f"{k.removeprefix(args.agent + '_')} {v:.2f}" for k, v in followed.items() if k.endswith("_success_mean")),
             flush=True)
-    follow = test_conf["drive"]["follow"]
-    report = table(rows, args.agent, [str(n) for n in follow["localization"]],
-                   [str(c) for c in test_conf["place"]["repeat_conditions"]])
+    localizations = [str(n) for n in test_conf["drive"]["follow"]["localization"]]
+    conditions = [str(c) for c in test_conf["place"]["repeat_conditions"]]
+    routes = sorted({k.rsplit("_", 1)[1] for row in rows for k in row["follow"] if "_success_route" in k},
+                    key=lambda name: int(name.removeprefix("route")))
+    report = (f"Success per condition\n\n{table(rows, args.agent, localizations, ['mean', 'min', *conditions])}\n\n"
+              f"Success per route of the teach route\n\n{table(rows, args.agent, localizations, routes)}")
     (out / "seeds.md").write_text(report + "\n")
     print(report)
 

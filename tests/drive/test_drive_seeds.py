@@ -25,7 +25,7 @@ def test_table_rows_per_seed_and_their_mean(drive_seeds) -> None:
             {"seed": 3, "train": {"check/success_rate": 0.7},
              "follow": {"lp_place_loop_success_mean": 0.5, "lp_place_loop_success_min": 0.2,
                         "lp_place_loop_success_fog": 0.8, "lp_place_loop_success_night": 0.2}}]
-    lines = drive_seeds.table(rows, "lp", ["place_loop"], ["fog", "night"]).splitlines()
+    lines = drive_seeds.table(rows, "lp", ["place_loop"], ["mean", "min", "fog", "night"]).splitlines()
     assert lines[0] == "| seed | check | place_loop mean | place_loop min | place_loop fog | place_loop night |"
     assert lines[2] == "| 0 | 0.60 | 0.90 | 0.80 | 0.80 | 1.00 |"
     assert lines[3] == "| 3 | 0.70 | 0.50 | 0.20 | 0.80 | 0.20 |"
