@@ -2,8 +2,10 @@
 
 A success rate of the teach route moves with one hard turn taken or missed, and which turns a controller takes moves
 with its training seed. This script trains the same controller (``train_controller.run``, the check included) once
-per seed on the training region's demonstrations, drives the test region's teach route with each
-(``follow_route.run``, the controller alone beside nothing), and prints one row per seed and the mean over seeds.
+per seed on the training region's demonstrations, runs the same check on unseen routes of the test region, drives
+the test region's teach route with each (``follow_route.run``, that controller alone), and prints one row per seed
+and the mean over the seeds: per condition, then per route of the teach route. The two checks are the independent
+figures (their routes choose nothing); the teach route's figure is the paper's.
 
 Usage (after the paper-sized run built the training region's demonstrations and the test region's topometric map;
 see the README, "Route following")::
@@ -29,6 +31,9 @@ import numpy as np
 
 from topoloc.config import deep_merge, load_layered
 from topoloc.drive import follow_route, train_controller
+from topoloc.drive.controller import load_controller
+from topoloc.drive.topo_lp import CONTROLLERS
+from topoloc.io import write_json
 
 
 def osm_input(region: str) -> str:
@@ -61,6 +66,21 @@ def train_seed(conf: dict[str, Any], agent: str, seed: int, out: Path) -> dict[s
     return train_controller.run(conf, inputs, {k: str(v) for k, v in outputs.items()})
 
 
+def check_seed(conf: dict[str, Any], agent: str, controller: Path, out: Path) -> dict[str, float]:
+    """The closed-loop check (``train_controller.check``) of ``controller`` on unseen routes of ``conf``'s region, written
+    to ``out`` (``check.json``), unless already there."""
+    if out.exists():
+        return json.loads(out.read_text())
+    region = conf["region"]["name"]
+    inputs = {"graph": require(Path("results") / region / "graph" / "graph.graphml", "build_graph"),
+              "osm": osm_input(region)}
+    model = load_controller(controller, cls=CONTROLLERS[agent])
+    metrics = train_controller.check(deep_merge(conf, {"controller": agent}), inputs, model)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_json(out, metrics)
+    return metrics
+
+
 def follow_seed(conf: dict[str, Any], agent: str, controller: Path, retrieval: str, out: Path) -> dict[str, float]:
     """Drive the teach route of ``conf``'s region with ``controller`` alone (``follow_route.run``) into ``out``."""
     metrics = out / "metrics.json"
@@ -79,13 +99,15 @@ def follow_seed(conf: dict[str, Any], agent: str, controller: Path, retrieval: s
 
 
 def table(rows: list[dict[str, Any]], agent: str, localizations: list[str], columns: list[str]) -> str:
-    """Markdown: per seed, the check's success rate and, per localization, the teach route's success ``columns``
-    (suffixes of ``follow_route``'s metrics: ``mean``, ``min``, a condition, ``route<k>``); then the mean over seeds."""
-    head = ["seed", "check"] + [f"{loc} {c}" for loc in localizations for c in columns]
+    """Markdown: per seed, its checks' success rates (``checks``: region -> rate) and, per localization, the teach
+    route's success ``columns`` (suffixes of ``follow_route``'s metrics: ``mean``, ``min``, a condition,
+    ``route<k>``); then the mean over the seeds."""
+    checks = list(rows[0]["checks"]) if rows else []
+    head = ["seed", *[f"check {name}" for name in checks]] + [f"{loc} {c}" for loc in localizations for c in columns]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     values = []
     for row in rows:
-        v = [row["train"].get("check/success_rate", np.nan)]
+        v = [row["checks"].get(name, np.nan) for name in checks]
         v += [row["follow"].get(f"{agent}_{loc}_success_{c}", np.nan) for loc in localizations for c in columns]
         values.append(v)
         lines.append(f"| {row['seed']} | " + " | ".join(f"{x:.2f}" for x in v) + " |")
@@ -111,9 +133,13 @@ def main() -> None:
     for seed in args.seeds:
         here = out / f"seed{seed}"
         trained = train_seed(train_conf, args.agent, seed, here / "train")
+        checks = {train_region: trained.get("check/success_rate", np.nan)}
+        if test_region != train_region:
+            tested = check_seed(test_conf, args.agent, here / "train" / "controller.ckpt", here / "check_test.json")
+            checks[test_region] = tested["check/success_rate"]
         followed = follow_seed(test_conf, args.agent, here / "train" / "controller.ckpt", retrieval, here / "follow")
-        rows.append({"seed": seed, "train": trained, "follow": followed})
-        print(f"seed {seed}: check {trained.get('check/success_rate', float('nan')):.2f}, " + ", ".join(
+        rows.append({"seed": seed, "checks": checks, "follow": followed})
+        print(f"seed {seed}: " + ", ".join(f"check {k} {v:.2f}" for k, v in checks.items()) + ", " + ", ".join(
             f"{k.removeprefix(args.agent + '_')} {v:.2f}" for k, v in followed.items() if k.endswith("_success_mean")),
             flush=True)
     localizations = [str(n) for n in test_conf["drive"]["follow"]["localization"]]

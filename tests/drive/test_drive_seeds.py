@@ -19,17 +19,17 @@ def drive_seeds():
 
 
 def test_table_rows_per_seed_and_their_mean(drive_seeds) -> None:
-    rows = [{"seed": 0, "train": {"check/success_rate": 0.6},
+    rows = [{"seed": 0, "checks": {"helsinki": 0.6, "kitti00": 0.8},
              "follow": {"lp_place_loop_success_mean": 0.9, "lp_place_loop_success_min": 0.8,
                         "lp_place_loop_success_fog": 0.8, "lp_place_loop_success_night": 1.0}},
-            {"seed": 3, "train": {"check/success_rate": 0.7},
+            {"seed": 3, "checks": {"helsinki": 0.7, "kitti00": 0.9},
              "follow": {"lp_place_loop_success_mean": 0.5, "lp_place_loop_success_min": 0.2,
                         "lp_place_loop_success_fog": 0.8, "lp_place_loop_success_night": 0.2}}]
     lines = drive_seeds.table(rows, "lp", ["place_loop"], ["mean", "min", "fog", "night"]).splitlines()
-    assert lines[0] == "| seed | check | place_loop mean | place_loop min | place_loop fog | place_loop night |"
-    assert lines[2] == "| 0 | 0.60 | 0.90 | 0.80 | 0.80 | 1.00 |"
-    assert lines[3] == "| 3 | 0.70 | 0.50 | 0.20 | 0.80 | 0.20 |"
-    assert lines[4] == "| **mean** | **0.65** | **0.70** | **0.50** | **0.80** | **0.60** |"
+    assert lines[0] == "| seed | check helsinki | check kitti00 | place_loop mean | place_loop min | place_loop fog | place_loop night |"
+    assert lines[2] == "| 0 | 0.60 | 0.80 | 0.90 | 0.80 | 0.80 | 1.00 |"
+    assert lines[3] == "| 3 | 0.70 | 0.90 | 0.50 | 0.20 | 0.80 | 0.20 |"
+    assert lines[4] == "| **mean** | **0.65** | **0.85** | **0.70** | **0.50** | **0.80** | **0.60** |"
 
 
 def test_missing_pipeline_output_is_one_line_naming_it(drive_seeds, tmp_path, monkeypatch) -> None:
