@@ -14,10 +14,11 @@ see the README, "Route following")::
         --train config/config.yaml --test config/kitti00.yaml --also config/drive_paper.yaml
 
 Everything is written under ``--out`` (default ``results/seeds/<train region>-<test region>/<agent>``), one folder
-per seed; a seed whose checkpoint or teach-and-repeat metrics are already there is not run again, so a killed run
-picks up where it stopped. The test region uses the training region's retrieval network and controller (the
-paper's protocol, ``config/drive_transfer.yaml``); with ``--test`` the same as ``--train`` it is the training
-region's own teach route.
+per seed; a checkpoint, check or teach-and-repeat result already there is not made again, so a killed run picks up
+where it stopped (copy a controller trained elsewhere to ``seed<k>/train/`` to evaluate it). The test region's
+teach route is localized with the training region's retrieval network, so its topometric map must have been built
+with it: the paper's protocol, ``config/drive_transfer.yaml``. With ``--test`` the same as ``--train`` it is the
+training region's own teach route and no second check.
 """
 
 from __future__ import annotations
@@ -68,7 +69,7 @@ def train_seed(conf: dict[str, Any], agent: str, seed: int, out: Path) -> dict[s
 
 def check_seed(conf: dict[str, Any], agent: str, controller: Path, out: Path) -> dict[str, float]:
     """The closed-loop check (``train_controller.check``) of ``controller`` on unseen routes of ``conf``'s region, written
-    to ``out`` (``check.json``), unless already there."""
+    to the JSON file ``out``, unless already there."""
     if out.exists():
         return json.loads(out.read_text())
     region = conf["region"]["name"]
