@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 from topoloc.config import deep_merge, load_layered
 from topoloc.drive import follow_route, train_controller
@@ -75,6 +76,7 @@ def check_seed(conf: dict[str, Any], agent: str, controller: Path, out: Path) ->
     region = conf["region"]["name"]
     inputs = {"graph": require(Path("results") / region / "graph" / "graph.graphml", "build_graph"),
               "osm": osm_input(region)}
+    torch.set_num_threads(int(conf["drive"]["threads"]))
     model = load_controller(controller, cls=CONTROLLERS[agent])
     metrics = train_controller.check(deep_merge(conf, {"controller": agent}), inputs, model)
     out.parent.mkdir(parents=True, exist_ok=True)
