@@ -15,10 +15,10 @@ see the README, "Route following")::
 
 Everything is written under ``--out`` (default ``results/seeds/<train region>-<test region>/<agent>``), one folder
 per seed; a checkpoint, check or teach-and-repeat result already there is not made again, so a killed run picks up
-where it stopped (copy a controller trained elsewhere to ``seed<k>/train/`` to evaluate it). The test region's
-teach route is localized with the training region's retrieval network, so its topometric map must have been built
-with it: the paper's protocol, ``config/drive_transfer.yaml``. With ``--test`` the same as ``--train`` it is the
-training region's own teach route and no second check.
+where it stopped (to evaluate a controller trained elsewhere, copy its ``controller.ckpt`` and ``metrics.json`` to
+``seed<k>/train/``). The test region's teach route is localized with the training region's retrieval network, so its
+topometric map must have been built with it: the paper's protocol, ``config/drive_transfer.yaml``. With ``--test``
+the same as ``--train`` it is the training region's own teach route and no second check.
 """
 
 from __future__ import annotations
