@@ -36,14 +36,7 @@ from topoloc.drive import follow_route, train_controller
 from topoloc.drive.controller import load_controller
 from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.io import write_json
-
-
-def osm_input(region: str) -> str:
-    """The region's downloaded OSM file (``download_osm``'s output, .osm or .osm.pbf)."""
-    found = sorted(p for p in (Path("results") / region / "osm").glob("region.osm*") if p.suffix != ".json")
-    if not found:
-        raise SystemExit(f"results/{region}/osm: no region.osm or region.osm.pbf (run the pipeline for {region} first)")
-    return str(found[0])
+from topoloc.osm.download_osm import raw_osm_suffix
 
 
 def require(path: Path, made_by: str) -> str:
@@ -51,6 +44,12 @@ def require(path: Path, made_by: str) -> str:
     if not path.exists():
         raise SystemExit(f"{path}: missing (made by the rule {made_by}; run the paper-sized pipeline first)")
     return str(path)
+
+
+def osm_input(conf: dict[str, Any]) -> str:
+    """The region's OSM file as ``download_osm`` writes it (``raw_osm_suffix`` of ``conf['region']``)."""
+    region = conf["region"]
+    return require(Path("results") / region["name"] / "osm" / f"region{raw_osm_suffix(region)}", "download_osm")
 
 
 def train_seed(conf: dict[str, Any], agent: str, seed: int, out: Path) -> dict[str, float]:
@@ -62,7 +61,7 @@ def train_seed(conf: dict[str, Any], agent: str, seed: int, out: Path) -> dict[s
     conf = deep_merge(conf, {"controller": agent, "drive": {"train": {"seed": seed, "log_model": False}}})
     inputs = {"demonstrations": require(Path("results") / region / "drive" / "demonstrations.npz", "simulate_demonstrations"),
               "graph": require(Path("results") / region / "graph" / "graph.graphml", "build_graph"),
-              "osm": osm_input(region)}
+              "osm": osm_input(conf)}
     outputs = {"model": out / "controller.ckpt", "history": out / "history.csv", "metrics": metrics,
                "figure": out / "training.png"}
     return train_controller.run(conf, inputs, {k: str(v) for k, v in outputs.items()})
@@ -75,7 +74,7 @@ def check_seed(conf: dict[str, Any], agent: str, controller: Path, out: Path) ->
         return json.loads(out.read_text())
     region = conf["region"]["name"]
     inputs = {"graph": require(Path("results") / region / "graph" / "graph.graphml", "build_graph"),
-              "osm": osm_input(region)}
+              "osm": osm_input(conf)}
     torch.set_num_threads(int(conf["drive"]["threads"]))
     model = load_controller(controller, cls=CONTROLLERS[agent])
     metrics = train_controller.check(deep_merge(conf, {"controller": agent}), inputs, model)
@@ -92,7 +91,7 @@ def follow_seed(conf: dict[str, Any], agent: str, controller: Path, retrieval: s
     region = conf["region"]["name"]
     conf = deep_merge(conf, {"drive": {"follow": {"agents": [agent]}}})
     root = Path("results") / region
-    inputs = {"osm": osm_input(region), "graph": require(root / "graph" / "graph.graphml", "build_graph"),
+    inputs = {"osm": osm_input(conf), "graph": require(root / "graph" / "graph.graphml", "build_graph"),
               f"controller_{agent}": str(controller), "model": retrieval,
               "map": require(root / "topometric_map" / "map.npz", "build_topometric_map")}
     out.mkdir(parents=True, exist_ok=True)

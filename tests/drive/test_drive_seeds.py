@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.conftest import make_config
+
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "drive_seeds.py"
 
 
@@ -33,8 +35,12 @@ def test_table_rows_per_seed_and_their_mean(drive_seeds) -> None:
 
 
 def test_missing_pipeline_output_is_one_line_naming_it(drive_seeds, tmp_path, monkeypatch) -> None:
+    conf = make_config(region={"name": "town", "osm_file": "town.osm"})  # download_osm writes it as region.osm
     monkeypatch.chdir(tmp_path)
-    with pytest.raises(SystemExit, match=r"results/nowhere/osm: no region.osm"):
-        drive_seeds.osm_input("nowhere")
+    with pytest.raises(SystemExit, match=r"results/town/osm/region.osm: missing \(made by the rule download_osm"):
+        drive_seeds.osm_input(conf)
+    (tmp_path / "results" / "town" / "osm").mkdir(parents=True)
+    (tmp_path / "results" / "town" / "osm" / "region.osm").write_text("<osm/>")
+    assert drive_seeds.osm_input(conf) == "results/town/osm/region.osm"
     with pytest.raises(SystemExit, match=r"map.npz: missing \(made by the rule build_topometric_map"):
         drive_seeds.require(tmp_path / "map.npz", "build_topometric_map")
