@@ -28,7 +28,7 @@ from topoloc.config import load
 from topoloc.drive.closed_loop import DLMAgent, GroundTruth, PlaceLocalization, vertex_lane_s
 from topoloc.drive.controller import load_controller
 from topoloc.drive.demonstrations import as_input
-from topoloc.drive.routes import evaluation_route, image_shape, make_simulator
+from topoloc.drive.routes import evaluation_route, image_shape, make_simulator, place_window
 from topoloc.drive.simulator import RUNNING, Control
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.place.network import load_model
@@ -55,7 +55,7 @@ def speed(conf: dict, root: Path, steps: int, localizer: str, controller: Path) 
     for name, use_agent, loc in (("render only", False, None), ("render + controller", True, GroundTruth(lane_s)),
                                  ("render + localization", False, "place"), ("closed loop", True, "place")):
         localization = PlaceLocalization(make(localizer), topo, retrieval, place["localize"],
-                                         int(place["image"]["height"])) if loc == "place" else loc
+                                         place_window(conf)) if loc == "place" else loc
         obs = sim.reset(condition, 1)
         if localization is not None:
             localization.start(np.random.default_rng(0))

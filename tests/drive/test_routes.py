@@ -10,7 +10,7 @@ import pytest
 from tests.conftest import make_config
 from tests.drive.conftest import drive_conf, route_scene, town_route
 from topoloc.drive.closed_loop import PlaceLocalization
-from topoloc.drive.routes import drive_rig, image_shape
+from topoloc.drive.routes import drive_rig, hfov_deg, image_shape, place_window
 from topoloc.place.images import make_rig
 from topoloc.render.conditions import get_condition
 from topoloc.render.renderer import Renderer
@@ -34,8 +34,24 @@ def test_the_camera_sees_the_ground_as_close_as_asked():
         assert drive_rig(make_config(drive={"camera": {"nearest_ground_m": far}})) == place
 
 
-def test_the_top_rows_are_the_place_image(town, town_graph):
+def test_a_wider_camera_adds_columns_on_both_sides():
     conf = make_config()
+    place, narrow = make_rig(conf["place"]["image"], conf["render"]), drive_rig(conf)
+    assert 80.0 < hfov_deg(place) < 83.0  # KITTI's intrinsics
+    assert place_window(conf) == (slice(0, 48), slice(0, 160))
+    for hfov in (100.0, 120.0):
+        wide = drive_rig(make_config(drive={"camera": {"hfov_deg": hfov}}))
+        side = (wide.width - place.width) // 2
+        assert wide.width == place.width + 2 * side and wide.cx == pytest.approx(place.cx + side)
+        assert (wide.height, wide.f, wide.cy) == (narrow.height, place.f, place.cy)
+        assert hfov_deg(dataclasses.replace(wide, width=wide.width - 2, cx=wide.cx - 1)) < hfov <= hfov_deg(wide)
+    assert drive_rig(make_config(drive={"camera": {"hfov_deg": 60.0}})) == narrow  # already wider than that
+    assert drive_rig(make_config(drive={"camera": {"hfov_deg": 120.0}})).width == 322
+
+
+@pytest.mark.parametrize("hfov", [None, 120.0])
+def test_the_place_window_is_the_place_image(town, town_graph, hfov):
+    conf = make_config(drive={"camera": {"hfov_deg": hfov}})
     route = town_route(town_graph, "straight", drive_conf())
     scene = route_scene(town["osm"], town_graph, route)
     place, rig = make_rig(conf["place"]["image"], conf["render"]), drive_rig(conf)
@@ -43,7 +59,8 @@ def test_the_top_rows_are_the_place_image(town, town_graph):
     noiseless = dataclasses.replace(condition, noise_std=0.0)
     top = Renderer(scene, rig, noiseless, 0, 100.0).render(route.xy[100], float(route.yaw[100]))
     alone = Renderer(scene, place, noiseless, 0, 100.0).render(route.xy[100], float(route.yaw[100]))
-    assert np.abs(top[: place.height].astype(int) - alone.astype(int)).max() <= 1
+    assert top.shape == image_shape(conf)
+    assert np.abs(top[place_window(conf)].astype(int) - alone.astype(int)).max() <= 1
     below = top[place.height:].astype(float)
     assert below.std() > 5.0  # the road, not a blank band
 
@@ -71,7 +88,8 @@ class _Recorder:
 def test_the_localization_reads_the_place_images_rows():
     recorder = _Recorder()
     topo = type("T", (), {"embedding": np.zeros((3, 4), np.float32)})()
-    loc = PlaceLocalization(recorder, topo, recorder, {}, rows=48)
+    conf = make_config(drive={"camera": {"hfov_deg": 120}})
+    loc = PlaceLocalization(recorder, topo, recorder, {}, place_window(conf))
     loc.start(np.random.default_rng(0))
-    loc.update(np.zeros((72, 160, 3), np.uint8), 1.0, None)
+    loc.update(np.zeros(image_shape(conf), np.uint8), 1.0, None)
     assert recorder.shapes == [(48, 160, 3)]

@@ -4,7 +4,7 @@ by a localization on the topometric map.
 * **Localization** answers, every step, the map vertex the vehicle is at. :class:`GroundTruth` reads it off
   the vehicle's true progress along the lane; :class:`PlaceLocalization` runs a place localizer of the
   registry (:mod:`topoloc.localizers`: ``place_loop``, ``place_filter``, ``place_odometry``) on the step's
-  image (its top rows: the place images' camera), scored by the retrieval network against the map's embeddings, and on the odometry distance (the
+  image (its place window: the place images' camera), scored by the retrieval network against the map's embeddings, and on the odometry distance (the
   true distance with the noise model of ``place.odometry_noise``: a scale error per drive and white noise).
   It is *unsure* when no answer of the last ``lost_steps`` steps had a confidence of at least
   ``place.localize.threshold``; the agents then slow down to ``slow_mps`` (as the paper does while relocalizing).
@@ -155,14 +155,15 @@ class GroundTruth:
 
 
 class PlaceLocalization:
-    """A place localizer of the registry on the map, fed the top ``rows`` of the step's image (the place images'
-    camera, :func:`topoloc.drive.routes.drive_rig`) and the odometry distance."""
+    """A place localizer of the registry on the map, fed the ``window`` (rows, columns) of the step's image that is the
+    place images' camera (:func:`topoloc.drive.routes.place_window`) and the odometry distance."""
 
-    def __init__(self, localizer: Localizer, topo: TopometricMap, model: Any, conf: dict[str, Any], rows: int) -> None:
+    def __init__(self, localizer: Localizer, topo: TopometricMap, model: Any, conf: dict[str, Any],
+                 window: tuple[slice, slice]) -> None:
         if model.hparams.embedding_dim != topo.embedding.shape[1]:
             raise InputError("map", f"the topometric map holds {topo.embedding.shape[1]}-d embeddings; the retrieval "
                              f"model gives {model.hparams.embedding_dim}-d ones (rebuild the map with this model)")
-        self.localizer, self.topo, self.model, self.conf, self.rows = localizer, topo, model, conf, int(rows)
+        self.localizer, self.topo, self.model, self.conf, self.window = localizer, topo, model, conf, window
         self.name = localizer.name
 
     def start(self, rng: np.random.Generator) -> None:
@@ -170,7 +171,7 @@ class PlaceLocalization:
         self.scorer = OnlineScorer(self.model, self.topo.embedding)
 
     def update(self, image: NDArray[np.uint8], ds: float, sim: Simulator) -> tuple[int, float]:
-        t = self.scorer.add(image[: self.rows])
+        t = self.scorer.add(image[self.window])
         answer = self.localizer.update(Frame(float(ds), t, self.scorer))
         return int(answer.state), float(answer.confidence)
 

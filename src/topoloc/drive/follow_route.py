@@ -45,7 +45,7 @@ from topoloc.drive.closed_loop import (
 from topoloc.drive.controller import AGENT_NAMES, load_controller
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.plot import frame_grid, paths_figure, success_figure
-from topoloc.drive.routes import image_shape, make_simulator, teach_route
+from topoloc.drive.routes import image_shape, make_simulator, place_window, teach_route
 from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
@@ -84,9 +84,9 @@ def intersections(command: np.ndarray) -> int:
 
 
 def place_localization(name: str, topo: TopometricMap, model: Any, localize: dict[str, Any],
-                       rows: int) -> PlaceLocalization:
-    """A new localization by the registered place localizer ``name`` (on the top ``rows`` of each image)."""
-    return PlaceLocalization(cast(PlaceLocalizer, make(name, PLACE_OBSERVATIONS)), topo, model, localize, rows)
+                       window: tuple[slice, slice]) -> PlaceLocalization:
+    """A new localization by the registered place localizer ``name`` (on the place images' ``window`` of each image)."""
+    return PlaceLocalization(cast(PlaceLocalizer, make(name, PLACE_OBSERVATIONS)), topo, model, localize, window)
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
@@ -103,7 +103,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     graph = RoadGraph.load(inputs["graph"])
     parts = repeat_routes(teach_route(graph, conf), TopometricMap.load(inputs["map"]), follow["length_m"],
                           int(follow["routes"]))
-    controllers = {a: load_controller(inputs[f"controller_{a}"], image_shape(conf), "drive.camera.nearest_ground_m",
+    controllers = {a: load_controller(inputs[f"controller_{a}"], image_shape(conf), "drive.camera",
                                       CONTROLLERS[a]) for a in follow["agents"] if a in CONTROLLERS}
     retrieval = load_model(inputs["model"]) if place_names else None
     ahead = follow["teach_speed_ahead_m"]
@@ -123,7 +123,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
                   "replay": partial(ReplayAgent, teach_steer, teach_speed, float(drive["expert"]["speed_gain"]))}
         locs = {"ground_truth": partial(GroundTruth, lane_s)}
         for name in place_names:
-            locs[name] = partial(place_localization, name, topo, retrieval, place["localize"], int(place["image"]["height"]))
+            locs[name] = partial(place_localization, name, topo, retrieval, place["localize"], place_window(conf))
         for condition, repeat, agent, loc in runs:
             seed = int(np.random.SeedSequence([int(drive["seed"]), 59, names["repeat"].index(condition), repeat, k])
                        .generate_state(1)[0])
