@@ -9,13 +9,18 @@ what Topo-LP is given, in its lane's frame). With ``side_views`` each kept step 
 vehicle's, labelled with the expert's control from there (:func:`side_view`). Routes take ``conditions_per_route``
 of the conditions (:func:`route_conditions`). Steps closer than ``min_distance_m`` to the teach route are dropped,
 so training and evaluation places are disjoint; a route keeping fewer than ``min_steps`` steps is drawn
-again. The last ``val_routes`` routes are for validation.
+again. The last ``val_routes`` routes are for validation. A route's drives depend on its index and the config alone
+(:func:`demonstrate_route`), so ``workers`` forked processes record routes side by side with the same result.
 """
 
 from __future__ import annotations
 
 import logging
+import multiprocessing as mp
+from collections.abc import Iterator
+from contextlib import ExitStack
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -227,36 +232,74 @@ def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] |
                      f"{demo_conf['min_steps']} steps {demo_conf['min_distance_m']} m away from the teach route")
 
 
+def demonstrate_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None, make_route: Any,
+                      make_simulator: Any) -> tuple[list[Demonstrations], list[str], list[NDArray[np.bool_]]]:
+    """Training route ``r`` (:func:`training_route`) under each of its conditions (:func:`route_conditions`): the kept
+    steps of each drive, its outcome and whether each of its own steps was under noise injection. A route's drives
+    depend on ``r`` and the config alone, so routes can be recorded in any order or in parallel."""
+    drive = conf["drive"]
+    demo_conf = drive["demonstrations"]
+    conditions = [str(c) for c in demo_conf["conditions"]]
+    every = int(demo_conf.get("record_every", 1))
+    noise = NoiseSettings.from_conf(drive["noise"])
+    color = bool(conf["place"]["image"]["color"])
+    side = SideViews(int(demo_conf["side_views"]), float(demo_conf["side_lateral_m"]), float(demo_conf["side_yaw_deg"]))
+    chosen = training_route(r, conf, avoid_xy, make_route, candidates=int(demo_conf["candidates"]))
+    sim = make_simulator(chosen)
+    expert = Expert(chosen, sim.spec, ExpertSettings.from_conf(drive["expert"]))
+    parts, outcomes, injected = [], [], []
+    for c in route_conditions(r, len(conditions), demo_conf.get("conditions_per_route")):
+        seed = int(np.random.SeedSequence([int(drive["seed"]), 43, r, c]).generate_state(1)[0])
+        demo, status = record(sim, expert, conditions[c], seed, noise, every, color, conditions, r, side)
+        outcomes.append(status)
+        injected.append(demo.perturbed[:: 1 + side.count])  # the drive's own steps (side views follow each)
+        parts.append(keep_away(demo, avoid_xy, float(demo_conf["min_distance_m"])))
+    return parts, outcomes, injected
+
+
 def demonstrate(osm: str | None, graph: RoadGraph, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None,
                 make_route: Any, make_simulator: Any) -> tuple[Demonstrations, dict[str, float]]:
     """Record every training route under every training condition (``conf`` holds ``drive``, ``place``, ``render``).
 
     ``make_route(rng)`` draws a route (or None), ``make_simulator(route)`` builds its simulator.
     """
-    drive = conf["drive"]
-    demo_conf = drive["demonstrations"]
-    conditions = [str(c) for c in demo_conf["conditions"]]
-    for i, name in enumerate(conditions):
-        get_condition(name, f"drive.demonstrations.conditions.{i}")
+    demo_conf = conf["drive"]["demonstrations"]
+    for i, name in enumerate(demo_conf["conditions"]):
+        get_condition(str(name), f"drive.demonstrations.conditions.{i}")
     if int(demo_conf["val_routes"]) >= int(demo_conf["routes"]):
         raise InputError("drive.demonstrations.val_routes", "must be fewer than drive.demonstrations.routes")
-    every = int(demo_conf.get("record_every", 1))
-    noise = NoiseSettings.from_conf(drive["noise"])
-    settings = ExpertSettings.from_conf(drive["expert"])
-    color = bool(conf["place"]["image"]["color"])
-    side = SideViews(int(demo_conf["side_views"]), float(demo_conf["side_lateral_m"]), float(demo_conf["side_yaw_deg"]))
+    global _ROUTE_JOB
+    _ROUTE_JOB = partial(demonstrate_route, conf=conf, avoid_xy=avoid_xy, make_route=make_route,
+                         make_simulator=make_simulator)
+    routes, workers = range(int(demo_conf["routes"])), min(int(demo_conf.get("workers", 1)), int(demo_conf["routes"]))
     parts, outcomes, injected = [], [], []
-    for r in tqdm(range(int(demo_conf["routes"])), desc="demonstration routes", unit="route"):
-        chosen = training_route(r, conf, avoid_xy, make_route, candidates=int(demo_conf["candidates"]))
-        sim = make_simulator(chosen)
-        expert = Expert(chosen, sim.spec, settings)
-        for c in route_conditions(r, len(conditions), demo_conf.get("conditions_per_route")):
-            condition = conditions[c]
-            seed = int(np.random.SeedSequence([int(drive["seed"]), 43, r, c]).generate_state(1)[0])
-            demo, status = record(sim, expert, condition, seed, noise, every, color, conditions, r, side)
-            outcomes.append(status)
-            injected.append(demo.perturbed[:: 1 + side.count])  # the drive's own steps (side views follow each)
-            parts.append(keep_away(demo, avoid_xy, float(demo_conf["min_distance_m"])))
+    try:
+        with ExitStack() as stack:
+            results: Iterator[Any] = map(_record_route, routes)
+            if workers > 1:  # forked: the children inherit the job, whose route makers are closures pickle cannot send
+                pool = stack.enter_context(mp.get_context("fork").Pool(workers, cv2.setNumThreads, (1,)))
+                results = pool.imap(_record_route, routes)
+            for route_parts, route_outcomes, route_injected in tqdm(results, total=len(routes), unit="route",
+                                                                    desc="demonstration routes"):
+                parts += route_parts
+                outcomes += route_outcomes
+                injected += route_injected
+    finally:
+        _ROUTE_JOB = None
+    return collect_demonstrations(parts, outcomes, injected, conf, avoid_xy)
+
+
+_ROUTE_JOB: Any = None  # demonstrate()'s demonstrate_route with its arguments bound, while it runs
+
+
+def _record_route(r: int) -> tuple[list[Demonstrations], list[str], list[NDArray[np.bool_]]]:
+    return _ROUTE_JOB(r)
+
+
+def collect_demonstrations(parts: list[Demonstrations], outcomes: list[str], injected: list[NDArray[np.bool_]],
+                           conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None) -> tuple[Demonstrations, dict[str, float]]:
+    """The routes' drives (:func:`demonstrate_route`, in route order) as one set, and its facts."""
+    demo_conf = conf["drive"]["demonstrations"]
     demos = Demonstrations.concat(parts)
     if not len(demos):
         raise InputError("drive.demonstrations", "no demonstration step was kept")
