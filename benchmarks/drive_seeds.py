@@ -52,14 +52,16 @@ def osm_input(conf: dict[str, Any]) -> str:
     return require(Path("results") / region["name"] / "osm" / f"region{raw_osm_suffix(region)}", "download_osm")
 
 
-def train_seed(conf: dict[str, Any], agent: str, seed: int, out: Path) -> dict[str, float]:
-    """Train ``agent`` with ``drive.train.seed = seed`` (and its check) into ``out``, unless already there."""
+def train_seed(conf: dict[str, Any], agent: str, seed: int, out: Path, demonstrations: Path | None = None) -> dict[str, float]:
+    """Train ``agent`` with ``drive.train.seed = seed`` (and its check) into ``out``, unless already there, on
+    ``demonstrations`` (default: the pipeline's of ``conf``'s region)."""
     metrics = out / "metrics.json"
     if (out / "controller.ckpt").exists() and metrics.exists():
         return json.loads(metrics.read_text())
     region = conf["region"]["name"]
     conf = deep_merge(conf, {"controller": agent, "drive": {"train": {"seed": seed, "log_model": False}}})
-    inputs = {"demonstrations": require(Path("results") / region / "drive" / "demonstrations.npz", "simulate_demonstrations"),
+    demonstrations = demonstrations or Path("results") / region / "drive" / "demonstrations.npz"
+    inputs = {"demonstrations": require(demonstrations, "simulate_demonstrations"),
               "graph": require(Path("results") / region / "graph" / "graph.graphml", "build_graph"),
               "osm": osm_input(conf)}
     outputs = {"model": out / "controller.ckpt", "history": out / "history.csv", "metrics": metrics,
@@ -126,6 +128,9 @@ def main() -> None:
     parser.add_argument("--also", nargs="*", default=["config/drive_paper.yaml"],
                         help="config files merged over both (later ones win)")
     parser.add_argument("--out", type=Path, help="output folder (default results/seeds/<train>-<test>/<agent>)")
+    parser.add_argument("--demonstrations", type=Path,
+                        help="the training region's demonstrations, when --also changes what they hold (such as "
+                             "drive.camera) from the pipeline's (default results/<train>/drive/demonstrations.npz)")
     args = parser.parse_args()
     train_conf, test_conf = load_layered(args.train, args.also), load_layered(args.test, args.also)
     train_region, test_region = train_conf["region"]["name"], test_conf["region"]["name"]
@@ -134,7 +139,7 @@ def main() -> None:
     rows = []
     for seed in args.seeds:
         here = out / f"seed{seed}"
-        trained = train_seed(train_conf, args.agent, seed, here / "train")
+        trained = train_seed(train_conf, args.agent, seed, here / "train", args.demonstrations)
         checks = {train_region: trained.get("check/success_rate", np.nan)}
         if test_region != train_region:
             tested = check_seed(test_conf, args.agent, here / "train" / "controller.ckpt", here / "check_test.json")

@@ -44,3 +44,5 @@ def test_missing_pipeline_output_is_one_line_naming_it(drive_seeds, tmp_path, mo
     assert drive_seeds.osm_input(conf) == "results/town/osm/region.osm"
     with pytest.raises(SystemExit, match=r"map.npz: missing \(made by the rule build_topometric_map"):
         drive_seeds.require(tmp_path / "map.npz", "build_topometric_map")
+    with pytest.raises(SystemExit, match=r"wide/demos.npz: missing \(made by the rule simulate_demonstrations"):
+        drive_seeds.train_seed(conf, "lp", 0, tmp_path / "out", tmp_path / "wide" / "demos.npz")

@@ -13,6 +13,7 @@ import pytest
 
 from tests.conftest import make_config
 from tests.drive.conftest import drive_conf, node_at, route_scene
+from topoloc.config import deep_merge
 from topoloc.drive import simulate_demonstrations, train_controller
 from topoloc.drive.controller import load_controller
 from topoloc.drive.expert import Expert, ExpertSettings
@@ -152,3 +153,6 @@ def test_train_controller_runs_its_dagger_rounds_and_check_on_the_town(town, tmp
     assert json.loads(Path(outputs["metrics"]).read_text()) == pytest.approx(metrics)
     assert metrics["check/routes"] == 3 and 0.0 <= metrics["check/success_rate"] <= 1.0
     load_controller(outputs["model"], (48, 64, 3))
+    wide = deep_merge(conf, {"drive": {"camera": {"hfov_deg": 120.0}}})  # another camera than the demonstrations'
+    with pytest.raises(InputError, match=r"demos\.npz.*recorded with 64x48x3 images, but drive\.camera .* give 130x48x3"):
+        train_controller.run(wide, inputs | {"demonstrations": demo_out["demonstrations"]}, outputs)

@@ -32,7 +32,7 @@ from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.local_path import lane_frame_path, path_plane
 from topoloc.drive.on_policy import DaggerSettings, closed_loop_check, collect
 from topoloc.drive.plot import training_figure
-from topoloc.drive.routes import make_simulator, random_drive_route, teach_route
+from topoloc.drive.routes import image_shape, make_simulator, random_drive_route, teach_route
 from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
@@ -183,6 +183,10 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     its ``round``), ``metrics`` (``check/...`` among them) and ``figure``."""
     drive = conf["drive"]
     demos = Demonstrations.load(inputs["demonstrations"])
+    if demos.images.shape[1:] != image_shape(conf):
+        h, w, c = demos.images.shape[1:]
+        raise InputError(inputs["demonstrations"], f"recorded with {w}x{h}x{c} images, but drive.camera and place.image "
+                         "give {1}x{0}x{2}: simulate the demonstrations again".format(*image_shape(conf)))
     agent = str(conf.get("controller", "dlm"))
     rounds = DaggerSettings.from_conf(drive["dagger"]).rounds if "dagger" in drive else 0
     log_model = bool(drive["train"]["log_model"])
