@@ -12,7 +12,9 @@ from topoloc.drive.demonstrations import (
     LOCAL_PATH_M,
     Demonstrations,
     SideViews,
+    collect_demonstrations,
     demonstrate,
+    demonstrate_route,
     local_path,
     record,
     route_conditions,
@@ -126,22 +128,21 @@ def test_candidates_keep_the_training_route_with_the_most_sharp_bends(town_graph
     assert training_route(0, conf, None, make_route, candidates=3) is right and len(drawn) == 4
 
 
-def test_routes_recorded_side_by_side_are_the_same_demonstrations(town, town_graph):
-    """drive.demonstrations.workers: each route's drives depend on its index alone, so forked workers record the
-    same steps, images and facts as one process."""
+def test_routes_recorded_in_another_order_are_the_same_demonstrations(town, town_graph):
+    """A route's drives depend on its index and the config alone (demonstrate_route): recorded last to first, each
+    in a fresh simulator, they are the same steps, images and facts as demonstrate's (so routes can be recorded in
+    separate processes)."""
     conf = make_config(place={"image": {"width": 64, "height": 48}},
                        drive={"demonstrations": {"routes": 3, "val_routes": 1, "route_length_m": 120, "min_steps": 20,
                                                  "min_distance_m": 0, "side_views": 1, "conditions": ["clear_noon", "rain"],
                                                  "conditions_per_route": 1}})
-
-    def record_with(workers: int):
-        conf["drive"]["demonstrations"]["workers"] = workers
-        return demonstrate(str(town["osm"]), town_graph, conf, None,
-                           lambda rng: random_drive_route(town_graph, conf, 120.0, rng),
-                           lambda route: make_simulator(str(town["osm"]), town_graph, route, conf))
-
-    (alone, facts), (side_by_side, facts_3) = record_with(1), record_with(3)
-    assert facts == facts_3 and facts["routes"] == 3 and len(np.unique(alone.route)) == 3
-    assert np.array_equal(alone.images, side_by_side.images) and alone.conditions == side_by_side.conditions
+    makers = (lambda rng: random_drive_route(town_graph, conf, 120.0, rng),
+              lambda route: make_simulator(str(town["osm"]), town_graph, route, conf))
+    alone, facts = demonstrate(str(town["osm"]), town_graph, conf, None, *makers)
+    backwards = {r: demonstrate_route(r, conf, None, *makers) for r in (2, 1, 0)}
+    parts, outcomes, injected = ([p for r in range(3) for p in backwards[r][i]] for i in range(3))
+    again, facts_again = collect_demonstrations(parts, outcomes, injected, conf, None)
+    assert facts == facts_again and facts["routes"] == 3 and len(np.unique(alone.route)) == 3
+    assert np.array_equal(alone.images, again.images) and alone.conditions == again.conditions
     for name in Demonstrations.FIELDS:
-        assert np.array_equal(getattr(alone, name), getattr(side_by_side, name)), name
+        assert np.array_equal(getattr(alone, name), getattr(again, name)), name

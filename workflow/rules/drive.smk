@@ -24,7 +24,6 @@ rule simulate_demonstrations:
         "results/{region}/logs/simulate_demonstrations.log",
     benchmark:
         "results/{region}/benchmarks/simulate_demonstrations.tsv"
-    threads: config["drive"]["demonstrations"]["workers"]
     script:
         "../scripts/simulate_demonstrations.py"
 

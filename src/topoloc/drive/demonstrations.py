@@ -10,17 +10,13 @@ vehicle's, labelled with the expert's control from there (:func:`side_view`). Ro
 of the conditions (:func:`route_conditions`). Steps closer than ``min_distance_m`` to the teach route are dropped,
 so training and evaluation places are disjoint; a route keeping fewer than ``min_steps`` steps is drawn
 again. The last ``val_routes`` routes are for validation. A route's drives depend on its index and the config alone
-(:func:`demonstrate_route`), so ``workers`` forked processes record routes side by side with the same result.
+(:func:`demonstrate_route`), so routes can be recorded in any order, or in separate processes, with the same result.
 """
 
 from __future__ import annotations
 
 import logging
-import multiprocessing as mp
-from collections.abc import Iterator
-from contextlib import ExitStack
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -268,32 +264,13 @@ def demonstrate(osm: str | None, graph: RoadGraph, conf: dict[str, Any], avoid_x
         get_condition(str(name), f"drive.demonstrations.conditions.{i}")
     if int(demo_conf["val_routes"]) >= int(demo_conf["routes"]):
         raise InputError("drive.demonstrations.val_routes", "must be fewer than drive.demonstrations.routes")
-    global _ROUTE_JOB
-    _ROUTE_JOB = partial(demonstrate_route, conf=conf, avoid_xy=avoid_xy, make_route=make_route,
-                         make_simulator=make_simulator)
-    routes, workers = range(int(demo_conf["routes"])), min(int(demo_conf.get("workers", 1)), int(demo_conf["routes"]))
     parts, outcomes, injected = [], [], []
-    try:
-        with ExitStack() as stack:
-            results: Iterator[Any] = map(_record_route, routes)
-            if workers > 1:  # forked: the children inherit the job, whose route makers are closures pickle cannot send
-                pool = stack.enter_context(mp.get_context("fork").Pool(workers, cv2.setNumThreads, (1,)))
-                results = pool.imap(_record_route, routes)
-            for route_parts, route_outcomes, route_injected in tqdm(results, total=len(routes), unit="route",
-                                                                    desc="demonstration routes"):
-                parts += route_parts
-                outcomes += route_outcomes
-                injected += route_injected
-    finally:
-        _ROUTE_JOB = None
+    for r in tqdm(range(int(demo_conf["routes"])), desc="demonstration routes", unit="route"):
+        route_parts, route_outcomes, route_injected = demonstrate_route(r, conf, avoid_xy, make_route, make_simulator)
+        parts += route_parts
+        outcomes += route_outcomes
+        injected += route_injected
     return collect_demonstrations(parts, outcomes, injected, conf, avoid_xy)
-
-
-_ROUTE_JOB: Any = None  # demonstrate()'s demonstrate_route with its arguments bound, while it runs
-
-
-def _record_route(r: int) -> tuple[list[Demonstrations], list[str], list[NDArray[np.bool_]]]:
-    return _ROUTE_JOB(r)
 
 
 def collect_demonstrations(parts: list[Demonstrations], outcomes: list[str], injected: list[NDArray[np.bool_]],
