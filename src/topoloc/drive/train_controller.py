@@ -183,10 +183,10 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     its ``round``), ``metrics`` (``check/...`` among them) and ``figure``."""
     drive = conf["drive"]
     demos = Demonstrations.load(inputs["demonstrations"])
-    if demos.images.shape[1:] != image_shape(conf):
-        h, w, c = demos.images.shape[1:]
+    (h, w, c), (want_h, want_w, want_c) = demos.images.shape[1:], image_shape(conf)
+    if (h, w, c) != (want_h, want_w, want_c):
         raise InputError(inputs["demonstrations"], f"recorded with {w}x{h}x{c} images, but drive.camera and place.image "
-                         "give {1}x{0}x{2}: simulate the demonstrations again".format(*image_shape(conf)))
+                         f"give {want_w}x{want_h}x{want_c}: simulate the demonstrations again")
     agent = str(conf.get("controller", "dlm"))
     rounds = DaggerSettings.from_conf(drive["dagger"]).rounds if "dagger" in drive else 0
     log_model = bool(drive["train"]["log_model"])
