@@ -230,15 +230,18 @@ def drive_conf(drive_keys, place_keys):
 
 
 def controller_conf(controller):
-    """The config slice of train_controller: the training's keys, and with DAgger rounds (drive.dagger) or the
-    closed-loop check (drive.check) those of the simulator, the expert and the routes (so a change to them reruns the
-    training only when the controller drives)."""
+    """The config slice of train_controller: the training's keys and the camera (the demonstrations' images must be
+    its), and with DAgger rounds (drive.dagger) or the closed-loop check (drive.check) those of the simulator, the
+    expert and the routes (so a change to them reruns the training only when the controller drives)."""
     drive = config["drive"]
-    keys = ("threads", "vehicle", "expert", "network", "train", *(("path_noise",) if controller == "lp" else ()))
+    keys = ("threads", "camera", "vehicle", "expert", "network", "train",
+            *(("path_noise",) if controller == "lp" else ()))
     if drive["dagger"]["rounds"] or drive["check"]["routes"]:
-        conf = drive_conf((*keys, "seed", "camera", "episode", "lane", "demonstrations", "dagger", "check"),
+        conf = drive_conf((*keys, "seed", "episode", "lane", "demonstrations", "dagger", "check"),
                           ("route", "image", "command", "repeat_conditions"))
         conf["drive"]["follow"] = {k: drive["follow"][k] for k in ("start_lateral_m", "start_yaw_deg")}
     else:
-        conf = {"drive": {k: drive[k] for k in keys} | {"demonstrations": {"val_routes": drive["demonstrations"]["val_routes"]}}}
+        conf = {"drive": {k: drive[k] for k in keys} | {"demonstrations": {"val_routes": drive["demonstrations"]["val_routes"]}},
+                "place": {"image": config["place"]["image"]},
+                "render": {"camera_height_m": config["render"]["camera_height_m"]}}
     return {"controller": controller} | conf
