@@ -72,6 +72,7 @@ class _Recorder:
 
     def __init__(self) -> None:
         self.shapes: list[tuple[int, ...]] = []
+        self.images: list[np.ndarray] = []
         self.hparams = type("H", (), {"embedding_dim": 4})()
 
     def reset(self, topo, conf) -> None:
@@ -79,6 +80,7 @@ class _Recorder:
 
     def embed(self, images):
         self.shapes.append(images.shape[1:])
+        self.images.append(images[0])
         return np.zeros((len(images), 4), np.float32)
 
     def update(self, frame):
@@ -91,5 +93,8 @@ def test_the_localization_reads_the_place_images_rows():
     conf = make_config(drive={"camera": {"hfov_deg": 120}})
     loc = PlaceLocalization(recorder, topo, recorder, {}, place_window(conf))
     loc.start(np.random.default_rng(0))
-    loc.update(np.zeros(image_shape(conf), np.uint8), 1.0, None)
+    h, w, c = image_shape(conf)
+    columns = np.broadcast_to(np.arange(w, dtype=np.uint16)[None, :, None], (h, w, c))  # each pixel holds its column
+    loc.update(columns, 1.0, None)
     assert recorder.shapes == [(48, 160, 3)]
+    assert recorder.images[0][0, :, 0].tolist() == list(range(81, 241))  # the middle 160 of 322 columns
