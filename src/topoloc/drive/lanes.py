@@ -315,7 +315,7 @@ def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_
     s = np.concatenate([[0.0], np.cumsum(step)])
     d = np.gradient(xy, axis=0)
     yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
-    crossings = route_intersections(graph, label, xy, lookahead_m, straight_deg)
+    crossings = route_intersections(graph, label, xy, lookahead_m, straight_deg, command_m)
     command = vertex_commands(xy, crossings, command_m)
     # Rasters around the route: every road nearby (drivable area) and the route's own roads (corridor).
     lo, hi = centre.min(axis=0) - RASTER_MARGIN_M, centre.max(axis=0) + RASTER_MARGIN_M

@@ -9,10 +9,13 @@ One vertex per teach frame holds
   the localization integrates in);
 * the **navigation command** (the paper's discrete local move): ``left``, ``right`` or ``straight`` when
   the next intersection of the route (a graph node of degree 3 or more where the route changes road) is
-  within ``command.distance_m`` ahead, else ``follow`` (the lane). The turn is read from the road graph:
-  the turning angle (:func:`topoloc.geometry.turning_angle`: 180 straight, 90 left, 270 right) between
-  the points ``command.lookahead_m`` back along the entry road and forward along the exit road; within
-  ``command.straight_deg`` of 180 it is ``straight``.
+  within ``command.distance_m`` ahead, else ``follow`` (the lane). The turn is the manoeuvre the vehicle
+  makes while it is told: the drive's heading change from where the command is first shown
+  (``command.distance_m`` before the intersection, or the previous intersection) to ``command.lookahead_m``
+  past it, as a turning angle (:func:`topoloc.geometry.turning_angle`: 180 straight, 90 left, 270 right);
+  within ``command.straight_deg`` of 180 it is ``straight``. So a sharp bend of the approach counts: a route
+  that bends 67 deg right into a junction it then crosses straight on is told ``right``, not ``straight``
+  (the junction's own angle, read from the graph, would tell a Topo-DLM to drive straight through the bend).
 
 The ground-truth position of each vertex is kept for evaluation only. The stage is
 :mod:`topoloc.place.build_topometric_map`.
@@ -29,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from topoloc.errors import InputError
-from topoloc.geometry import point_along, turning_angle
+from topoloc.geometry import polyline_turning_angles
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
 from topoloc.place.images import PlaceSet
@@ -107,10 +110,28 @@ def classify_turn(angle_deg: float, straight_deg: float) -> str:
     return "left" if angle_deg < 180.0 else "right"
 
 
+def drive_heading_change(xy: NDArray[np.float64], s_from: float, s_to: float, step_m: float = 1.0) -> float:
+    """Counter-clockwise heading change (degrees, left positive, not wrapped) of a drive ``xy`` between arc
+    lengths ``s_from`` and ``s_to``: from its chord over the first ``step_m`` to its chord over the last, summed
+    over chords of ``step_m`` (robust to frames that repeat a position while the vehicle stands)."""
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+    keep = np.concatenate([[True], np.diff(cum) > 0])
+    cum, pts = cum[keep], xy[keep]
+    lo, hi = max(0.0, s_from), min(float(cum[-1]), s_to)
+    if hi - lo < 2 * step_m:
+        return 0.0
+    at = np.linspace(lo, hi, int(round((hi - lo) / step_m)) + 1)
+    samples = np.column_stack([np.interp(at, cum, pts[:, 0]), np.interp(at, cum, pts[:, 1])])
+    return float(np.sum(180.0 - polyline_turning_angles(samples)))
+
+
 def route_intersections(graph: RoadGraph, edge: NDArray[np.int64], xy: NDArray[np.float64], lookahead_m: float,
-                        straight_deg: float) -> list[Intersection]:
-    """Intersections a drive passes, from its per-frame road edges ``edge`` and positions ``xy``."""
-    out = []
+                        straight_deg: float, distance_m: float) -> list[Intersection]:
+    """Intersections a drive passes, from its per-frame road edges ``edge`` and positions ``xy``; each classed by
+    the drive's heading change from ``distance_m`` before it (or the previous intersection) to ``lookahead_m``
+    past it (see the module docstring)."""
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+    out: list[Intersection] = []
     for k in np.flatnonzero(np.diff(edge) != 0) + 1:
         e1, e2 = int(edge[k - 1]), int(edge[k])
         if e1 < 0 or e2 < 0:
@@ -118,12 +139,8 @@ def route_intersections(graph: RoadGraph, edge: NDArray[np.int64], xy: NDArray[n
         node = _shared_node(graph, e1, e2, xy[k])
         if int(graph.nodes.degree.at[node]) < 3:
             continue  # a bend or a change of one-way direction, not an intersection
-        centre = graph.nodes.loc[node, ["x", "y"]].to_numpy(float)
-        entry = graph.edge_coords(e1, graph.other_end(e1, node))  # ends at node
-        leave = graph.edge_coords(e2, node)  # starts at node
-        before = point_along(entry[::-1], lookahead_m)
-        after = point_along(leave, lookahead_m)
-        angle = float(turning_angle(before, centre, after))
+        shown = max(cum[k] - distance_m, cum[out[-1].frame] if out else 0.0)
+        angle = float(np.mod(180.0 - drive_heading_change(xy, shown, cum[k] + lookahead_m), 360.0))
         out.append(Intersection(int(k), node, classify_turn(angle, straight_deg), angle))
     return out
 
@@ -155,7 +172,8 @@ def build_map(teach: PlaceSet, graph: RoadGraph, model: Any, conf: dict[str, Any
     rng = np.random.default_rng([int(conf["seed"]), 23])
     odometry = noisy_odometry(teach.xy, teach.yaw, conf["odometry_noise"], rng)
     cmd = conf["command"]
-    crossings = route_intersections(graph, teach.edge, teach.xy, float(cmd["lookahead_m"]), float(cmd["straight_deg"]))
+    crossings = route_intersections(graph, teach.edge, teach.xy, float(cmd["lookahead_m"]), float(cmd["straight_deg"]),
+                                    float(cmd["distance_m"]))
     command = vertex_commands(teach.xy, crossings, float(cmd["distance_m"]))
     topo = TopometricMap(embedding.astype(np.float32), descriptor, odometry.xy, command, teach.xy, teach.conditions[0])
     drift = np.hypot(*(odometry.xy - teach.xy).T)
