@@ -316,7 +316,7 @@ def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_
     d = np.gradient(xy, axis=0)
     yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
     crossings = route_intersections(graph, label, xy, lookahead_m, straight_deg, command_m)
-    command = vertex_commands(xy, crossings, command_m)
+    command = vertex_commands(xy, crossings, command_m, lookahead_m)
     # Rasters around the route: every road nearby (drivable area) and the route's own roads (corridor).
     lo, hi = centre.min(axis=0) - RASTER_MARGIN_M, centre.max(axis=0) + RASTER_MARGIN_M
     origin = (float(lo[0]), float(hi[1]))
