@@ -11,7 +11,8 @@ can leave a radius of 1 m, which no car can follow) are widened by smoothing the
 (:func:`widen_bends`), so the vehicle can follow every lane it is given. The carriageway width is the
 renderer's (:func:`topoloc.render.textures.carriageway_width`: what the images show): the road's OSM ``width`` tag,
 else its ``lanes`` tag times a lane width, else a per-class default. Each lane sample carries its road edge and the **navigation command** of Cai & Wan
-(``follow``, or ``left`` / ``right`` / ``straight`` within ``command_m`` before an intersection), from
+(``follow``, or ``left`` / ``right`` / ``straight`` from ``command_m`` before an intersection to ``lookahead_m``
+past it: the drive's heading change over that stretch), from
 :func:`topoloc.place.topometric_map.route_intersections`, the rule that labels the topometric map's vertices.
 
 Two rasters (0.25 m cells) judge where the vehicle is: the **drivable area** (every road of the graph near
