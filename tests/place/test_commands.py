@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import numpy as np
 import pytest
 
 from tests.trajectory.trajectory_helpers import make_graph
-from topoloc.place.topometric_map import (COMMANDS, Intersection, classify_turn, drive_heading_change, route_intersections,
-                                          vertex_commands)
+from topoloc.place.topometric_map import (
+    COMMANDS,
+    Intersection,
+    classify_turn,
+    drive_heading_change,
+    route_intersections,
+    vertex_commands,
+)
 
 
 def test_turn_classes():
@@ -38,7 +46,7 @@ def test_commands_cover_the_distance_before_each_intersection():
 def _drive(points: list[tuple[float, float]], edges: list[int], step_m: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """Frames every ``step_m`` along the polyline ``points``, each labelled with the edge of its leg."""
     xy, label = [], []
-    for (a, b), edge in zip(zip(points[:-1], points[1:]), edges):
+    for (a, b), edge in zip(pairwise(points), edges):
         a, b = np.asarray(a, float), np.asarray(b, float)
         n = int(np.hypot(*(b - a)) / step_m)
         xy.append(a + np.outer(np.arange(n) / n, b - a))

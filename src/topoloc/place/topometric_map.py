@@ -121,7 +121,7 @@ def drive_heading_change(xy: NDArray[np.float64], s_from: float, s_to: float, st
     lo, hi = max(0.0, s_from), min(float(cum[-1]), s_to)
     if hi - lo < 2 * step_m:
         return 0.0
-    at = np.linspace(lo, hi, int(round((hi - lo) / step_m)) + 1)
+    at = np.linspace(lo, hi, round((hi - lo) / step_m) + 1)
     samples = np.column_stack([np.interp(at, cum, pts[:, 0]), np.interp(at, cum, pts[:, 1])])
     return float(np.sum(180.0 - polyline_turning_angles(samples)))
 
