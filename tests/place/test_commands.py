@@ -34,13 +34,6 @@ def test_commands_cover_the_distance_before_each_intersection():
     close = [COMMANDS[c] for c in vertex_commands(xy, [Intersection(30, 1, "left", 90.0),
                                                         Intersection(40, 2, "straight", 180.0)], 20.0)]
     assert close[10:30] == ["left"] * 20 and close[30:40] == ["straight"] * 10
-    # kept for after_m past each intersection while the turn is under way, unless the next one's approach begins
-    held = [COMMANDS[c] for c in vertex_commands(xy, crossings, 20.0, 10.0)]
-    assert held[10:40] == ["left"] * 30 and held[40:50] == ["follow"] * 10 and held[50:80] == ["right"] * 30
-    assert held[80:] == ["follow"] * 20
-    held = [COMMANDS[c] for c in vertex_commands(xy, [Intersection(30, 1, "left", 90.0),
-                                                       Intersection(45, 2, "right", 270.0)], 20.0, 10.0)]
-    assert held[10:30] == ["left"] * 20 and held[30:55] == ["right"] * 25 and held[55:] == ["follow"] * 45
 
 
 def _drive(points: list[tuple[float, float]], edges: list[int], step_m: float = 0.5) -> tuple[np.ndarray, np.ndarray]:

@@ -11,8 +11,8 @@ can leave a radius of 1 m, which no car can follow) are widened by smoothing the
 (:func:`widen_bends`), so the vehicle can follow every lane it is given. The carriageway width is the
 renderer's (:func:`topoloc.render.textures.carriageway_width`: what the images show): the road's OSM ``width`` tag,
 else its ``lanes`` tag times a lane width, else a per-class default. Each lane sample carries its road edge and the **navigation command** of Cai & Wan
-(``follow``, or ``left`` / ``right`` / ``straight`` from ``command_m`` before an intersection to ``lookahead_m``
-past it: the drive's heading change over that stretch), from
+(``follow``, or ``left`` / ``right`` / ``straight`` within ``command_m`` before an intersection: the drive's heading
+change from there to ``lookahead_m`` past it), from
 :func:`topoloc.place.topometric_map.route_intersections`, the rule that labels the topometric map's vertices.
 
 Two rasters (0.25 m cells) judge where the vehicle is: the **drivable area** (every road of the graph near
@@ -317,7 +317,7 @@ def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_
     d = np.gradient(xy, axis=0)
     yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
     crossings = route_intersections(graph, label, xy, lookahead_m, straight_deg, command_m)
-    command = vertex_commands(xy, crossings, command_m, lookahead_m)
+    command = vertex_commands(xy, crossings, command_m)
     # Rasters around the route: every road nearby (drivable area) and the route's own roads (corridor).
     lo, hi = centre.min(axis=0) - RASTER_MARGIN_M, centre.max(axis=0) + RASTER_MARGIN_M
     origin = (float(lo[0]), float(hi[1]))

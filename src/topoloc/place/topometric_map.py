@@ -9,9 +9,8 @@ One vertex per teach frame holds
   the localization integrates in);
 * the **navigation command** (the paper's discrete local move): ``left``, ``right`` or ``straight`` when
   the next intersection of the route (a graph node of degree 3 or more where the route changes road) is
-  within ``command.distance_m`` ahead, and still ``command.lookahead_m`` past it while the turn is under way
-  (unless the next intersection's approach begins), else ``follow`` (the lane). The turn is the manoeuvre the
-  vehicle makes while it is told: the drive's heading change from where the command is first shown
+  within ``command.distance_m`` ahead, else ``follow`` (the lane). The turn is the manoeuvre the vehicle
+  makes while it is told: the drive's heading change from where the command is first shown
   (``command.distance_m`` before the intersection, or the previous intersection) to ``command.lookahead_m``
   past it, as a turning angle (:func:`topoloc.geometry.turning_angle`: 180 straight, 90 left, 270 right);
   within ``command.straight_deg`` of 180 it is ``straight``. So a sharp bend of the approach counts: a route
@@ -146,15 +145,10 @@ def route_intersections(graph: RoadGraph, edge: NDArray[np.int64], xy: NDArray[n
     return out
 
 
-def vertex_commands(xy: NDArray[np.float64], intersections: list[Intersection], distance_m: float,
-                    after_m: float = 0.0) -> NDArray[np.int64]:
-    """Command index per frame: that of the next intersection when it is within ``distance_m`` ahead, else that of
-    the last one while it is within ``after_m`` behind (the turn is still under way), else follow."""
+def vertex_commands(xy: NDArray[np.float64], intersections: list[Intersection], distance_m: float) -> NDArray[np.int64]:
+    """Command index per frame: that of the next intersection when it is within ``distance_m`` ahead, else follow."""
     cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
     command = np.zeros(len(xy), np.int64)
-    for item in intersections:  # after each intersection first: the next one's approach overrides it
-        past = np.arange(item.frame, len(xy))
-        command[past[cum[past] - cum[item.frame] < after_m]] = COMMANDS.index(item.command)
     previous = 0
     for item in intersections:
         ahead = np.arange(previous, item.frame)
@@ -180,7 +174,7 @@ def build_map(teach: PlaceSet, graph: RoadGraph, model: Any, conf: dict[str, Any
     cmd = conf["command"]
     crossings = route_intersections(graph, teach.edge, teach.xy, float(cmd["lookahead_m"]), float(cmd["straight_deg"]),
                                     float(cmd["distance_m"]))
-    command = vertex_commands(teach.xy, crossings, float(cmd["distance_m"]), float(cmd["lookahead_m"]))
+    command = vertex_commands(teach.xy, crossings, float(cmd["distance_m"]))
     topo = TopometricMap(embedding.astype(np.float32), descriptor, odometry.xy, command, teach.xy, teach.conditions[0])
     drift = np.hypot(*(odometry.xy - teach.xy).T)
     facts = {"vertices": float(len(topo)), "length_m": float(topo.s[-1]),
