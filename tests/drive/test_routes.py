@@ -87,7 +87,7 @@ class _Recorder:
         return type("A", (), {"state": 0, "confidence": 1.0})()
 
 
-def test_the_localization_reads_the_place_images_rows():
+def test_the_localization_reads_the_place_cameras_window():
     recorder = _Recorder()
     topo = type("T", (), {"embedding": np.zeros((3, 4), np.float32)})()
     conf = make_config(drive={"camera": {"hfov_deg": 120}})

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from topoloc.errors import InputError
-from topoloc.geometry import polyline_turning_angles
+from topoloc.geometry import heading_change
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
 from topoloc.place.images import PlaceSet
@@ -122,7 +122,7 @@ def drive_heading_change(xy: NDArray[np.float64], s_from: float, s_to: float, st
         return 0.0
     at = np.linspace(lo, hi, round((hi - lo) / step_m) + 1)
     samples = np.column_stack([np.interp(at, cum, pts[:, 0]), np.interp(at, cum, pts[:, 1])])
-    return float(np.sum(180.0 - polyline_turning_angles(samples)))
+    return float(np.sum(heading_change(samples[:-2], samples[1:-1], samples[2:])))
 
 
 def route_intersections(graph: RoadGraph, edge: NDArray[np.int64], xy: NDArray[np.float64], lookahead_m: float,
