@@ -15,6 +15,7 @@ from tests.conftest import make_config
 from tests.drive.conftest import drive_conf, node_at, route_scene
 from topoloc.config import deep_merge
 from topoloc.drive import simulate_demonstrations, train_controller
+from topoloc.drive.config_slices import controller_slice
 from topoloc.drive.controller import load_controller
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.lanes import build_route, plan_route
@@ -124,9 +125,9 @@ def test_the_closed_loop_check_tells_a_driver_from_a_wreck(town):
     assert sum(v for k, v in bad.items() if k in ("check/off_road", "check/wrong_road", "check/reversed")) == 3
 
 
-def town_conf() -> dict:
-    """Drive stages' config on the town: short routes, small images and networks, three repeat conditions."""
-    conf = make_config(
+def town_config() -> dict:
+    """The whole config on the town: short routes, small images and networks, three repeat conditions."""
+    return make_config(
         render={"length_m": 160.0},
         place={"image": {"width": 64, "height": 48}, "repeat_conditions": ["overcast", "sunset", "rain"]},
         drive={"demonstrations": {"routes": 3, "val_routes": 1, "route_length_m": 150, "min_distance_m": 0, "min_steps": 20,
@@ -135,6 +136,11 @@ def town_conf() -> dict:
                "train": {"batch_size": 16, "batches_per_epoch": 4, "max_epochs": 1, "max_time_min": None,
                          "accelerator": "cpu", "log_model": False, "log_every_n_steps": 1},
                "dagger": {"rounds": 2, "epochs": 1}, "check": {"routes": 3}})
+
+
+def town_conf() -> dict:
+    """Drive stages' config on the town (:func:`town_config`) as the stages read it."""
+    conf = town_config()
     return {"controller": "dlm", "drive": conf["drive"], "place": conf["place"], "render": conf["render"]}
 
 
@@ -156,3 +162,9 @@ def test_train_controller_runs_its_dagger_rounds_and_check_on_the_town(town, tmp
     wide = deep_merge(conf, {"drive": {"camera": {"hfov_deg": 120.0}}})  # another camera than the demonstrations'
     with pytest.raises(InputError, match=r"demos\.npz.*recorded with 64x48x3 images, but drive\.camera .* give 130x48x3"):
         train_controller.run(wide, inputs | {"demonstrations": demo_out["demonstrations"]}, outputs)
+    # The rule's own slice when the controller does not drive (no DAgger round, no check) holds what training reads.
+    still = controller_slice(deep_merge(town_config(), {"drive": {"dagger": {"rounds": 0}, "check": {"routes": 0}}}), "lp")
+    assert not {"dagger", "check", "episode", "lane"} & set(still["drive"])
+    metrics = train_controller.run(still, inputs | {"demonstrations": demo_out["demonstrations"]}, outputs)
+    assert metrics["train_steps"] > 0 and not any(k.startswith(("check/", "dagger/")) for k in metrics)
+    assert "round" not in pd.read_csv(outputs["history"]).columns  # written again, by a fit without DAgger rounds

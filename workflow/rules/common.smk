@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 from topoloc.config import validate_and_fill
+from topoloc.drive.config_slices import RENDER_UNUSED, controller_slice, drive_slice
 from topoloc.errors import InputError
 from topoloc.code_digest import code_digest_of
 from topoloc.osm.download_osm import PYROSM_PREFIX, raw_osm_suffix, region_source
@@ -209,8 +210,7 @@ def place_conf(split):
     sliced = {k: place[k] for k in keys}
     if split == "train":  # which routes are for validation, and the training settings, do not change the images
         sliced["train"] = {k: place["train"][k] for k in ("routes", "route_length_m", "min_distance_m", "min_frames")}
-    unused = ("routes", "conditions", "sheet", "width", "height", "baseline_m")
-    render = {k: v for k, v in config["render"].items() if k not in unused}
+    render = {k: v for k, v in config["render"].items() if k not in RENDER_UNUSED}
     return {"split": split, "render": render, "place": sliced}
 
 
@@ -221,27 +221,10 @@ def trained_in(region, path):
 
 
 def drive_conf(drive_keys, place_keys):
-    """The config slice of a drive stage: the named drive and place keys (the camera, the teach route, and what
-    the stage reads of the place localization), and the render keys of the route and the scene."""
-    unused = ("routes", "conditions", "sheet", "width", "height", "baseline_m")
-    return {"drive": {k: config["drive"][k] for k in drive_keys},
-            "place": {k: config["place"][k] for k in place_keys},
-            "render": {k: v for k, v in config["render"].items() if k not in unused}}
+    """The config slice of a drive stage (:func:`topoloc.drive.config_slices.drive_slice`)."""
+    return drive_slice(config, drive_keys, place_keys)
 
 
 def controller_conf(controller):
-    """The config slice of train_controller: the training's keys and the camera (the demonstrations' images must be
-    its), and with DAgger rounds (drive.dagger) or the closed-loop check (drive.check) those of the simulator, the
-    expert and the routes (so a change to them reruns the training only when the controller drives)."""
-    drive = config["drive"]
-    keys = ("threads", "camera", "vehicle", "expert", "network", "train",
-            *(("path_noise",) if controller == "lp" else ()))
-    if drive["dagger"]["rounds"] or drive["check"]["routes"]:
-        conf = drive_conf((*keys, "seed", "episode", "lane", "demonstrations", "dagger", "check"),
-                          ("route", "image", "command", "repeat_conditions"))
-        conf["drive"]["follow"] = {k: drive["follow"][k] for k in ("start_lateral_m", "start_yaw_deg")}
-    else:
-        conf = {"drive": {k: drive[k] for k in keys} | {"demonstrations": {"val_routes": drive["demonstrations"]["val_routes"]}},
-                "place": {"image": config["place"]["image"]},
-                "render": {"camera_height_m": config["render"]["camera_height_m"]}}
-    return {"controller": controller} | conf
+    """The config slice of train_controller (:func:`topoloc.drive.config_slices.controller_slice`)."""
+    return controller_slice(config, controller)
