@@ -1,6 +1,6 @@
 """Benchmark of localization on the real KITTI 00 drive: every localizer from many starts beside the oracle.
 
-Needs the kitti00 pipeline's graph and odometry (``snakemake --configfile config/kitti00.yaml``; the learned
+Needs the kitti00 pipeline's graph and odometry (``snakemake --configfile config/regions/kitti00.yaml``; the learned
 localizers also its trained model, else they are left out):
 
     PYTHONPATH=src python benchmarks/bench_localization.py [--results results/kitti00] [--model PATH]

@@ -1,7 +1,7 @@
 """Scaling benchmark of a multi-region run: wall time with 1, 2 and 4 local cores and through a one-node Slurm,
 and the same config once more while another job loads the CPU (its tables must be identical).
 
-    python benchmarks/bench_regions.py [--configfile config/two_regions_quick.yaml]
+    python benchmarks/bench_regions.py [--configfile config/multi_region/two_regions_quick.yaml]
         [--runs cores1,cores2,loaded2,cores4,slurm] [--root /tmp/topoloc-bench-regions] [--target all]
 
 Each run is ``snakemake TARGET --configfile CONFIG`` in its own fresh clone of this repository's HEAD (commit
@@ -103,7 +103,7 @@ def run_slurm(checkout: Path, target: str, config: str) -> tuple[float, int]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--configfile", default="config/two_regions_quick.yaml")
+    parser.add_argument("--configfile", default="config/multi_region/two_regions_quick.yaml")
     parser.add_argument("--runs", default="cores1,cores2,loaded2,cores4,slurm")
     parser.add_argument("--root", default="/tmp/topoloc-bench-regions")
     parser.add_argument("--target", default="all")

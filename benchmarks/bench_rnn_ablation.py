@@ -2,9 +2,9 @@
 
 Needs the kitti00 pipeline's dataset, graph and odometry (``snakemake results/kitti00/dataset/stats.json
 results/kitti00/segments/gt/tokens.csv results/kitti00/segments/orbslam2/tokens.csv --configfile
-config/kitti00.yaml``)::
+config/regions/kitti00.yaml``)::
 
-    PYTHONPATH=src python benchmarks/bench_rnn_ablation.py [--configfile config/kitti00.yaml]
+    PYTHONPATH=src python benchmarks/bench_rnn_ablation.py [--configfile config/regions/kitti00.yaml]
         [--variants lstm-128,gru-128,rnn-128,lstm-64,lstm-256,lstm-128-tokens] [--localizers rnn_filter,strategy1]
         [--out results/bench_rnn_ablation]
 
@@ -72,7 +72,7 @@ def drive_figures(summary: pd.DataFrame, localizer: str) -> dict[str, float]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--configfile", default=str(REPO / "config" / "kitti00.yaml"))
+    parser.add_argument("--configfile", default=str(REPO / "config" / "regions" / "kitti00.yaml"))
     parser.add_argument("--results", default=None, help="results folder of the region (default: results/<region.name>)")
     parser.add_argument("--variants", default=DEFAULT_VARIANTS)
     parser.add_argument("--localizers", default="rnn_filter,strategy1")

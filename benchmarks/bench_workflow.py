@@ -3,7 +3,7 @@
 Runs in a scratch copy of the repository (results and MLflow store start
 empty) and prints a markdown table. Usage::
 
-    python benchmarks/bench_workflow.py [--configfile config/kitti00.yaml] [--repeats 3]
+    python benchmarks/bench_workflow.py [--configfile config/regions/kitti00.yaml] [--repeats 3]
 
 Targets (issue 2): ``snakemake -n all`` and a no-op rerun at most 5 s each;
 ``download_osm`` + ``build_graph`` on Helsinki at most 20 s.

@@ -3,7 +3,7 @@
 Usage (after ``train_controller`` built ``results/<region>/drive/<agent>/controller.ckpt``)::
 
     PYTHONPATH=src python benchmarks/check_failures.py --agent lp [--config config/config.yaml]
-        [--also config/drive_paper.yaml] [--controller CKPT] [--routes 50]
+        [--also config/experiments/drive_paper.yaml] [--controller CKPT] [--routes 50]
 
 Drives the check's routes (:func:`topoloc.drive.on_policy.closed_loop_check`: the same seeds, conditions and start
 offsets; the controller alone, told the route's command or local path) and prints one row per failed route: where

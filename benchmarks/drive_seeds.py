@@ -11,13 +11,13 @@ Usage (after the paper-sized run built the training region's demonstrations and 
 see the README, "Route following")::
 
     PYTHONPATH=src python benchmarks/drive_seeds.py --agent lp --seeds 0 1 2 3 4 \\
-        --train config/config.yaml --test config/kitti00.yaml --also config/drive_paper.yaml
+        --train config/config.yaml --test config/regions/kitti00.yaml --also config/experiments/drive_paper.yaml
 
 Everything is written under ``--out`` (default ``results/seeds/<train region>-<test region>/<agent>``), one folder
 per seed; a checkpoint, check or teach-and-repeat result already there is not made again, so a killed run picks up
 where it stopped (to evaluate a controller trained elsewhere, copy its ``controller.ckpt`` and ``metrics.json`` to
 ``seed<k>/train/``). The test region's teach route is localized with the training region's retrieval network, so its
-topometric map must have been built with it: the paper's protocol, ``config/drive_transfer.yaml``. With ``--test``
+topometric map must have been built with it: the paper's protocol, ``config/experiments/drive_transfer.yaml``. With ``--test``
 the same as ``--train`` it is the training region's own teach route and no second check.
 """
 
@@ -124,8 +124,8 @@ def main() -> None:
     parser.add_argument("--agent", choices=["dlm", "lp"], default="lp")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--train", default="config/config.yaml", help="the training region's config")
-    parser.add_argument("--test", default="config/kitti00.yaml", help="the config of the region whose teach route is driven")
-    parser.add_argument("--also", nargs="*", default=["config/drive_paper.yaml"],
+    parser.add_argument("--test", default="config/regions/kitti00.yaml", help="the config of the region whose teach route is driven")
+    parser.add_argument("--also", nargs="*", default=["config/experiments/drive_paper.yaml"],
                         help="config files merged over both (later ones win)")
     parser.add_argument("--out", type=Path, help="output folder (default results/seeds/<train>-<test>/<agent>)")
     parser.add_argument("--demonstrations", type=Path,

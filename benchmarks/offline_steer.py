@@ -3,7 +3,7 @@
 Usage (after ``train_controller`` built ``results/<region>/drive/<agent>/controller.ckpt``)::
 
     PYTHONPATH=src python benchmarks/offline_steer.py --agent lp [--config config/config.yaml]
-        [--also config/drive_paper.yaml] [--controller CKPT] [--steps 600]
+        [--also config/experiments/drive_paper.yaml] [--controller CKPT] [--steps 600]
 
 Open loop: the controller sees the recorded steps (image, speed, and the command or the local-path image without the
 training noise), as in training. For the validation routes (the last ``drive.demonstrations.val_routes``) and the

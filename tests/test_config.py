@@ -136,7 +136,7 @@ def test_each_source_accepts_what_it_needs(source):
     assert config["odometry"]["source"] == source
 
 
-@pytest.mark.parametrize("name", sorted(p.name for p in (REPO / "config").glob("*.yaml")))
+@pytest.mark.parametrize("name", sorted(p.relative_to(REPO / "config").as_posix() for p in (REPO / "config").rglob("*.yaml")))
 def test_every_shipped_config_is_valid_on_top_of_the_defaults(name):
     """What `snakemake --configfile config/<name>` parses: the file merged onto config/config.yaml, regions too."""
     import yaml
