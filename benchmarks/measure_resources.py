@@ -26,7 +26,7 @@ import re
 import sys
 from pathlib import Path
 
-import yaml
+from topoloc.config import load
 
 REPO = Path(__file__).resolve().parents[1]
 PROFILES = {"slurm": {}, "slurm-gpu": {"train_rnn": {"gpu": 1}, "train_retrieval": {"gpu": 1}, "train_controller": {"gpu": 1}}}
@@ -62,19 +62,10 @@ def benchmark_rows(results: list[Path], rules: list[str]) -> dict[str, list[dict
 
 
 def time_caps() -> dict[str, float]:
-    """The training rules' ``max_time_min`` safety caps in the default config."""
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
-    drive = config.get("drive", {}).get("train", {})
+    """The training rules' ``max_time_min`` safety caps in the default config (schema defaults filled in)."""
+    config = load(REPO / "config" / "config.yaml")
     return {"train_rnn": config["train"]["max_time_min"], "train_retrieval": config["place"]["train"]["max_time_min"],
-            "train_controller": drive.get("max_time_min", _schema_default("drive", "train", "max_time_min"))}
-
-
-def _schema_default(*keys: str) -> float:
-    """The schema's default of a config key (the default config leaves most drive keys out)."""
-    node = yaml.safe_load((REPO / "src" / "topoloc" / "config.schema.yaml").read_text())
-    for key in keys:
-        node = node["properties"][key]
-    return node["default"]
+            "train_controller": config["drive"]["train"]["max_time_min"]}
 
 
 def resources(rows: list[dict[str, float]], cap_min: float | None) -> tuple[int, dict[str, int]]:

@@ -13,6 +13,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+from topoloc.config import deep_merge
+
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -61,17 +63,17 @@ def workflow(tmp_path) -> Workflow:
         shutil.copytree(REPO / folder, root / folder, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
     # The pipeline's mechanics are under test here, not accuracy: small data and training budgets.
     config_path = root / "config" / "config.yaml"
-    config = yaml.safe_load(config_path.read_text())
-    config["odometry"]["simulated"]["drives"] = 1
-    config["render"].update(length_m=120, sheet={"conditions": ["clear_noon", "night"], "frames": 2})
-    config["dataset"]["max_paths_total"] = 2000
-    config["dataset"]["simulated"] = {"drives": 40, "length_m": [300, 600]}
-    config["train"]["log_every_n_steps"] = 1  # 32 training drives make one step per epoch: log every step
-    config["train"].update(max_epochs=2, max_time_min=0.5)
-    place = config["place"]
-    place["image"].update(width=64, height=48)
-    place["train"].update(routes=3, val_routes=1, route_length_m=120, min_distance_m=30, min_frames=20, batch_size=8,
-                          batches_per_epoch=4, max_epochs=1, max_time_min=0.5, val_pairs=16)
-    place["network"].update(channels=[8, 16], embedding_dim=16, hidden=32)
+    config = deep_merge(yaml.safe_load(config_path.read_text()), {
+        "odometry": {"simulated": {"drives": 1}},
+        "render": {"length_m": 120, "sheet": {"conditions": ["clear_noon", "night"], "frames": 2}},
+        "dataset": {"max_paths_total": 2000, "simulated": {"drives": 40, "length_m": [300, 600]}},
+        # 32 training drives make one step per epoch: log every step
+        "train": {"log_every_n_steps": 1, "max_epochs": 2, "max_time_min": 0.5},
+        "place": {"image": {"width": 64, "height": 48},
+                  "train": {"routes": 3, "val_routes": 1, "route_length_m": 120, "min_distance_m": 30, "min_frames": 20,
+                            "batch_size": 8, "batches_per_epoch": 4, "max_epochs": 1, "max_time_min": 0.5,
+                            "val_pairs": 16},
+                  "network": {"channels": [8, 16], "embedding_dim": 16, "hidden": 32}},
+    })
     config_path.write_text(yaml.safe_dump(config, sort_keys=False))
     return Workflow(root)
