@@ -1,7 +1,9 @@
-"""Config validation: a bad key of any section stops `snakemake -n` with one line naming it, before any job runs."""
+"""Config validation (a bad key of any section stops `snakemake -n` with one line naming it, before any job runs) and
+the shipped configs (each holds only what differs from what it stacks on, and config/README.md lists it)."""
 
 from __future__ import annotations
 
+import copy
 import os
 import subprocess
 import sys
@@ -147,3 +149,114 @@ def test_every_shipped_config_is_valid_on_top_of_the_defaults(name):
     regions = region_configs(conf, REPO)
     assert conf["region"]["name"] not in regions
     assert all(r["region"]["name"] == n for n, r in regions.items())
+
+
+CONFIG = REPO / "config" / "config.yaml"
+_MISSING = object()
+
+
+def stacking_problems(path: Path, stacks_on: Path | None, root: Path = REPO) -> list[str]:
+    """What the config file ``path`` repeats of the config it stacks on, and the keys it names that the schema lacks.
+
+    ``stacks_on``: the config file it is merged over (schema defaults filled); None: the schema's defaults alone.
+    A mapping entry of ``regions`` stacks on its ``file`` (relative to ``root``) merged over the run's config.
+    """
+    import yaml
+
+    from topoloc.config import load, region_configs, schema
+
+    data = yaml.safe_load(path.read_text()) or {}
+    problems = _problems(data, load(stacks_on), schema(), "")
+    entries = [(index, entry) for index, entry in enumerate(data.get("regions") or []) if isinstance(entry, dict)]
+    if entries:
+        run = load(stacks_on, {k: v for k, v in data.items() if k != "regions"})
+    for index, entry in entries:
+        base = next(iter(region_configs({**run, "regions": [entry["file"]]}, root).values())) if "file" in entry else run
+        problems += _problems({k: v for k, v in entry.items() if k != "file"}, base, schema(), f"regions.{index}.")
+    return problems
+
+
+def _problems(data: dict, reference: dict, node: dict, where: str) -> list[str]:
+    """Keys of ``data`` equal to ``reference`` (a filled config, or the defaults a schema ``node`` fills in), or unknown."""
+    problems = []
+    properties, extra = node.get("properties", {}), node.get("additionalProperties")
+    for key, value in data.items():
+        sub = properties.get(key, extra if isinstance(extra, dict) else None)
+        if sub is None:
+            problems.append(f"{where}{key}: not a key of the schema")
+            continue
+        # A free-named entry (a drive of odometry.drives) that the reference lacks stacks on the schema's defaults.
+        ref = reference.get(key, _MISSING if key in properties else _schema_defaults(sub))
+        if ref is not _MISSING and _same(value, ref):
+            problems.append(f"{where}{key}: repeats the value it stacks on ({value!r})")
+        elif isinstance(value, dict) and ("properties" in sub or isinstance(sub.get("additionalProperties"), dict)):
+            problems += _problems(value, ref if isinstance(ref, dict) else _schema_defaults(sub), sub, f"{where}{key}.")
+    return problems
+
+
+def _schema_defaults(node: dict) -> dict:
+    """What the schema fills into an empty mapping of ``node``."""
+    filled = {}
+    for key, sub in node.get("properties", {}).items():
+        if "default" in sub:
+            value = copy.deepcopy(sub["default"])
+            filled[key] = {**_schema_defaults(sub), **value} if isinstance(value, dict) else value
+    return filled
+
+
+def _same(a: object, b: object) -> bool:
+    """Equal values of the same types all the way down (10 and 10.0, or 1 and true, differ)."""
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, list):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    return a == b
+
+
+@pytest.mark.parametrize("name", sorted(p.relative_to(REPO / "config").as_posix() for p in (REPO / "config").rglob("*.yaml")))
+def test_every_shipped_config_holds_only_what_differs_from_what_it_stacks_on(name):
+    """config.yaml: from the schema's defaults; every other file: from config.yaml (schema defaults filled)."""
+    path = REPO / "config" / name
+    assert stacking_problems(path, None if path == CONFIG else CONFIG) == []
+    assert f"| `{name}` |" in (REPO / "config" / "README.md").read_text(), "config/README.md's table lacks the file"
+
+
+def test_the_default_config_differs_from_the_schema_only_in_its_region():
+    """So the CLI without --config (the schema's defaults) and a region file read alone by `load` (the CLI, the
+    benchmarks) give what the pipeline runs."""
+    from topoloc.config import load
+
+    default, schema_only = load(CONFIG), load(None)
+    assert default["region"]["name"] != schema_only["region"]["name"]
+    assert {k: v for k, v in default.items() if k != "region"} == {k: v for k, v in schema_only.items() if k != "region"}
+
+
+def test_a_repeated_default_and_an_unknown_key_are_found(tmp_path):
+    overlay = tmp_path / "overlay.yaml"
+    overlay.write_text("train:\n  lr: 0.01\n  lr_shedule: constant\n  max_time_min: null\n"
+                       "odometry:\n  drives:\n    run1: {poses: p.txt, gps: null}\n  simulated: {noise: {scale_error: 0.02}}\n"
+                       "region: {name: helsinki, place: null, osm_file: town.osm}\n")
+    assert stacking_problems(overlay, CONFIG, tmp_path) == [
+        "train.lr: repeats the value it stacks on (0.01)",
+        "train.lr_shedule: not a key of the schema",
+        "odometry.drives.run1.gps: repeats the value it stacks on (None)",
+        "odometry.simulated.noise.scale_error: repeats the value it stacks on (0.02)",
+        "region.name: repeats the value it stacks on ('helsinki')",
+        "region.place: repeats the value it stacks on (None)",
+    ]
+    config = tmp_path / "config.yaml"
+    config.write_text("region: {name: town, osm_file: town.osm}\nencoding: {angle_bins: 20, heading_lookahead_m: 12}\n")
+    assert stacking_problems(config, None, tmp_path) == ["encoding.angle_bins: repeats the value it stacks on (20)"]
+
+
+def test_a_region_entry_that_repeats_its_file_is_found(tmp_path):
+    (tmp_path / "town.yaml").write_text("region: {name: town, osm_file: town.osm}\nplace: {model_from: helsinki}\n")
+    runs = tmp_path / "runs.yaml"
+    runs.write_text("regions:\n  - file: town.yaml\n    place: {model_from: helsinki, seed: 3}\n"
+                    "  - {region: {name: city, osm_file: city.osm}, graph: {crs: null}}\n")
+    assert stacking_problems(runs, CONFIG, tmp_path) == [
+        "regions.0.place.model_from: repeats the value it stacks on ('helsinki')",
+        "regions.1.graph.crs: repeats the value it stacks on (None)",
+    ]
