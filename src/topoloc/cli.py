@@ -35,7 +35,8 @@ from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
 from topoloc.localization.localize import check_explained, check_on_map, write_geojson
-from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.localization.roadmap import RoadMap
+from topoloc.motion.poses import Odometry
 from topoloc.localizer import ROAD_OBSERVATIONS
 from topoloc.motion.georef import fit_rigid, from_origin, grid_heading_deg, to_map
 from topoloc.motion.poses import planar_yaw, read_gps, read_poses

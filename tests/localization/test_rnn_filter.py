@@ -10,7 +10,8 @@ from localization_helpers import irregular_grid
 from topoloc.config import load
 from topoloc.errors import InputError
 from topoloc.localization.rnn import OnlineRNN, edge_log_probs
-from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.localization.roadmap import RoadMap
+from topoloc.motion.poses import Odometry
 from topoloc.registry import make, registry
 from topoloc.trajectory.model import TrajectoryRNN
 

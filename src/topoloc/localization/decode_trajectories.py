@@ -26,7 +26,8 @@ from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json
 from topoloc.localization.evaluation import DriveTruth, start_frames
 from topoloc.localization.localize import write_geojson
-from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.localization.roadmap import RoadMap
+from topoloc.motion.poses import Odometry
 from topoloc.localizer import ROAD_OBSERVATIONS
 from topoloc.motion.poses import read_poses
 from topoloc.registry import check_names, make, registry

@@ -9,7 +9,8 @@ import numpy as np
 
 from topoloc.localization.city_filter import CityFilter, coarse_settings, uses_coarse
 from topoloc.localization.metric import MetricModel, MetricSettings, odometry_steps
-from topoloc.localization.roadmap import Observations, Odometry, RoadLocalizer, RoadMap
+from topoloc.localization.roadmap import Observations, RoadLocalizer, RoadMap
+from topoloc.motion.poses import Odometry
 from topoloc.localizer import Answer, Track, register
 
 
