@@ -4,7 +4,7 @@
         [--maxlen M] [--set localization.metric.KEY=VALUE ...]
 
 The drive is the ``--drive``-th of ``bench_city.py`` for that map and level (same seeds). All starts run in
-one :class:`~topoloc.localization.city_filter.CityFilter` as in the evaluation; after every step each
+one :class:`~topoloc.localization.metric.city_filter.CityFilter` as in the evaluation; after every step each
 start's probability of the true road (the roads of the frames within 8 of the step's), its phase (coarse or
 full grid), its entries and its answer are recorded. Prints per start the oracle's limit, the distance to
 localized, where it handed over, whether the truth's probability ever reached zero, and the figures at a few
@@ -22,9 +22,9 @@ from bench_city import MAPS
 from bench_simulated import load_conf
 
 from topoloc.graph.build_graph import build_road_graph
-from topoloc.localization.city_filter import CityFilter
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start, start_frames
-from topoloc.localization.metric import odometry_steps
+from topoloc.localization.metric.city_filter import CityFilter
+from topoloc.localization.metric.odometry_steps import odometry_steps
 from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.roadmap import RoadMap
 from topoloc.motion.poses import Odometry

@@ -10,9 +10,9 @@ from localization_helpers import irregular_grid
 from test_metric import NOISELESS, score
 
 from topoloc.config import load
-from topoloc.localization.city_filter import CityFilter, coarse_settings, uses_coarse
-from topoloc.localization.metric import MetricModel, MetricSettings
-from topoloc.localization.metric_filter import MetricFilter
+from topoloc.localization.metric.city_filter import CityFilter, coarse_settings, uses_coarse
+from topoloc.localization.metric.dense_filter import MetricFilter
+from topoloc.localization.metric.map_model import MetricModel, MetricSettings
 from topoloc.localization.roadmap import RoadMap
 from topoloc.motion.poses import Odometry
 from topoloc.odometry.simulate import NOISE_LEVELS, simulate_pattern_drive

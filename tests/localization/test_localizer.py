@@ -13,8 +13,8 @@ from topoloc.localization.decoders import beam_decode
 from topoloc.localization.hmm import CellHMM, HmmParams
 from topoloc.localization.rnn import edge_log_probs
 from topoloc.localization.roadmap import RoadMap
-from topoloc.motion.poses import Odometry
 from topoloc.localizer import Answer, Localizer, register
+from topoloc.motion.poses import Odometry
 from topoloc.registry import check_names, make, registry
 from topoloc.trajectory.model import TrajectoryRNN
 

@@ -9,8 +9,8 @@ from trajectory_helpers import random_graph
 
 from topoloc.config import load
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start
-from topoloc.localization.metric import MetricModel, MetricSettings
-from topoloc.localization.metric_filter import MetricFilter
+from topoloc.localization.metric.dense_filter import MetricFilter
+from topoloc.localization.metric.map_model import MetricModel, MetricSettings
 from topoloc.localization.roadmap import RoadMap
 from topoloc.motion.poses import Odometry
 from topoloc.odometry.simulate import NOISE_LEVELS, NoiseLevel, simulate_pattern_drive

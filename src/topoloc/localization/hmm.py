@@ -42,9 +42,9 @@ from numpy.typing import NDArray
 from topoloc.encoding import turning_angle_from_headings
 from topoloc.geometry import bin_centre, straight_token
 from topoloc.graph.road_graph import RoadGraph
-from topoloc.localization.cells import CellGrid, Chains
 from topoloc.localization.connectivity import DirectedEdges
 from topoloc.localization.decoders import Decoded
+from topoloc.localization.metric.cell_grid import CellGrid, Chains
 
 log = logging.getLogger(__name__)
 

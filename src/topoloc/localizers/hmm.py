@@ -9,8 +9,8 @@ import numpy as np
 from topoloc.geometry import straight_token
 from topoloc.localization.hmm import CellHMM, HmmParams
 from topoloc.localization.roadmap import Observations, RoadLocalizer, RoadMap, token_observations
-from topoloc.motion.poses import Odometry
 from topoloc.localizer import Answer, register
+from topoloc.motion.poses import Odometry
 
 
 @register

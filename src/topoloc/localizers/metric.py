@@ -1,5 +1,6 @@
-"""The metric filter: a Bayes filter over 2 m positions on the roads, on the odometry itself
-(:mod:`topoloc.localization.metric`; on city maps with a coarse phase, :mod:`topoloc.localization.city_filter`)."""
+"""The registered localizer ``metric``: the adapter of the metric filter (the package
+:mod:`topoloc.localization.metric`; on city maps with a coarse phase,
+:class:`~topoloc.localization.metric.city_filter.CityFilter`) to :class:`topoloc.localizer.Localizer`."""
 
 from __future__ import annotations
 
@@ -7,11 +8,12 @@ from typing import Any
 
 import numpy as np
 
-from topoloc.localization.city_filter import CityFilter, coarse_settings, uses_coarse
-from topoloc.localization.metric import MetricModel, MetricSettings, odometry_steps
+from topoloc.localization.metric.city_filter import CityFilter, coarse_settings, uses_coarse
+from topoloc.localization.metric.map_model import MetricModel, MetricSettings
+from topoloc.localization.metric.odometry_steps import odometry_steps
 from topoloc.localization.roadmap import Observations, RoadLocalizer, RoadMap
-from topoloc.motion.poses import Odometry
 from topoloc.localizer import Answer, Track, register
+from topoloc.motion.poses import Odometry
 
 
 @register

@@ -15,8 +15,8 @@ from topoloc.errors import InputError
 from topoloc.localization.decoders import Beam
 from topoloc.localization.rnn import OnlineRNN, check_model
 from topoloc.localization.roadmap import Observations, RoadLocalizer, RoadMap, token_observations
-from topoloc.motion.poses import Odometry
 from topoloc.localizer import Answer, register
+from topoloc.motion.poses import Odometry
 
 
 class _RnnLocalizer(RoadLocalizer):

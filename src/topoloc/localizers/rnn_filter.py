@@ -22,9 +22,9 @@ from topoloc.errors import InputError
 from topoloc.localization.hmm import CellHMM, HmmParams
 from topoloc.localization.rnn import OnlineRNN, check_model
 from topoloc.localization.roadmap import Observations, RoadMap, token_observations
-from topoloc.motion.poses import Odometry
 from topoloc.localizer import Answer, register
 from topoloc.localizers.hmm import HmmBaseline
+from topoloc.motion.poses import Odometry
 
 
 @register

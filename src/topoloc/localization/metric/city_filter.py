@@ -2,7 +2,7 @@
 
 On a city map (Heidelberg: 1.3 million cells of 2 m) a belief spread over the whole map costs about 0.2 s
 per 2 m step: slower than a car drives. A filter therefore starts on a *coarse* model of the same map
-(:class:`~topoloc.localization.metric.MetricModel` with cells ``coarse_factor`` times longer, on the same
+(:class:`~topoloc.localization.metric.map_model.MetricModel` with cells ``coarse_factor`` times longer, on the same
 chains, so that every fine cell lies in one coarse cell): a coarse step is taken every ``coarse_factor``
 fine steps (net, so reversing counts back), with the yaw at that moment; ``coarse_factor`` 4 costs about
 16 times less per metre. The coarse model may be more tolerant (heading spread and turn spread times
@@ -11,7 +11,7 @@ observation per coarse cell it already tells roads apart less sharply per metre 
 default spread is 1 and the coarse phase is kept short. Once the coarse belief of a filter holds at most
 ``coarse_handoff_cells`` positions (counted in fine cells), it is handed to the fine filter at a coarse
 step: each coarse entry's mass is spread over the fine cells it covers (by their length), with its heading
-offset belief; from there the filter is the dense one (:class:`~topoloc.localization.metric_filter.MetricFilter`).
+offset belief; from there the filter is the dense one (:class:`~topoloc.localization.metric.dense_filter.MetricFilter`).
 A fine filter that gets lost (more likely off the map than on it) goes back to the coarse phase with its
 belief summed into coarse cells, and the coarse filter spreads the returning mass over the map.
 
@@ -27,8 +27,9 @@ import dataclasses
 import numpy as np
 from numpy.typing import NDArray
 
-from topoloc.localization.metric import MetricModel, MetricSettings, concentration, resultant_length
-from topoloc.localization.metric_filter import COMPLEX, REAL, TINY, Estimate, MetricFilter
+from topoloc.localization.metric.dense_filter import COMPLEX, REAL, TINY, Estimate, MetricFilter
+from topoloc.localization.metric.map_model import MetricModel, MetricSettings
+from topoloc.localization.metric.von_mises import concentration, resultant_length
 
 
 def coarse_settings(settings: MetricSettings) -> MetricSettings:

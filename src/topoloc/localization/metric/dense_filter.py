@@ -20,7 +20,8 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from topoloc.localization.metric import MetricModel, concentration, resultant_length
+from topoloc.localization.metric.map_model import MetricModel
+from topoloc.localization.metric.von_mises import concentration, resultant_length
 
 TWO_PI = 2.0 * math.pi
 TINY = float(np.finfo(np.float32).tiny)
