@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     for j in range(n):
         fresh = np.flatnonzero(first == j)
         if len(fresh):
-            bank.reset(fresh)
+            bank.start(fresh)
         bank.update(int(steps.direction[j]), float(steps.yaw[j]))
         fr = min(int(steps.frame[j]), len(truth.edge) - 1)
         near = np.unique(truth.edge[max(0, fr - 8):fr + 8])

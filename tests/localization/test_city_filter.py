@@ -48,14 +48,14 @@ def test_small_maps_run_the_dense_filter_unchanged(grid):
     sim = simulate_pattern_drive(graph, 500.0, NOISE_LEVELS["medium"], np.random.default_rng(7))
     steps = make("metric").observe(sim.odometry, road, conf).items
     dense, city = MetricFilter(model), CityFilter(model, None)
-    dense.reset()
-    city.reset()
+    dense.start()
+    city.start()
     for direction, yaw in steps:
         dense.update(direction, yaw)
         city.update(direction, yaw)
         a, b = dense.answer(), city.answer()
         assert (a.edge, a.cell, a.confidence) == (b.edge, b.cell, b.confidence)
-    assert (dense.trace() == city.trace()).all()
+    assert (dense.path() == city.path()).all()
 
 
 @pytest.mark.parametrize("level, seed", [("none", 1), ("medium", 2), ("high", 3)])
@@ -85,7 +85,7 @@ def test_coarse_phase_hands_over_and_back(grid):
     assert np.allclose(np.bincount(bank.coarse_of, weights=bank.share), 1.0)
     sim = simulate_pattern_drive(graph, 1200.0, NOISE_LEVELS["medium"], np.random.default_rng(4))
     steps = make("metric").observe(sim.odometry, road, conf).items
-    bank.reset([0, 1])
+    bank.start([0, 1])
     phases = []
     for direction, yaw in steps:
         bank.update(direction, yaw)
@@ -94,7 +94,7 @@ def test_coarse_phase_hands_over_and_back(grid):
         assert abs(weight.sum() + offmap - 1.0) < 1e-4
     phases = np.array(phases)
     assert phases[0].all() and not phases[-1].any()  # coarse at first, fine once the belief narrowed
-    assert len(bank.trace(0)) == len(steps) and (bank.trace(0)[-50:] >= 0).all()
+    assert len(bank.path(0)) == len(steps) and (bank.path(0)[-50:] >= 0).all()
 
     # then the drive leaves the map (turns of 40 degrees every 15 m, which no road makes): the fine filter gets
     # lost and goes back to coarse cells
@@ -102,7 +102,7 @@ def test_coarse_phase_hands_over_and_back(grid):
     xy = sim.odometry.xy[-1] + np.cumsum(np.column_stack([np.cos(yaw), np.sin(yaw)]), axis=0)
     odometry = Odometry(np.vstack([sim.odometry.xy, xy]), np.concatenate([sim.odometry.yaw, yaw]))
     lost = CityFilter(fine, coarse)
-    lost.reset()
+    lost.start()
     phases, sure = [], []
     for direction, yaw in make("metric").observe(odometry, road, conf).items:
         lost.update(direction, yaw)
@@ -134,7 +134,7 @@ def test_handed_over_belief_is_the_coarse_one_at_that_step(grid):
     checked = 0
     for j, (direction, yaw) in enumerate(steps):
         if j in (0, 5, 11):  # starts at several phases of the coarse steps
-            bank.reset([0, 5, 11].index(j))
+            bank.start([0, 5, 11].index(j))
         handed.clear()
         bank.update(direction, yaw)
         for b, coarse_weight in handed.items():
@@ -159,8 +159,8 @@ def test_coarse_answers_kept_between_coarse_steps_are_the_current_ones(grid):
     phases = []
     for j, (direction, yaw) in enumerate(steps):
         if j in (0, 3, 9):
-            kept.reset([0, 3, 9].index(j))
-            fresh.reset([0, 3, 9].index(j))
+            kept.start([0, 3, 9].index(j))
+            fresh.start([0, 3, 9].index(j))
         kept.update(direction, yaw)
         fresh.update(direction, yaw)
         fresh._coarse_answers = None  # what an uncached filter would answer

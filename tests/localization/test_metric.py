@@ -82,12 +82,12 @@ def test_filters_started_together_or_later_agree_with_a_single_filter(grid):
     localizer = make("metric")
     steps = localizer.observe(sim.odometry, road, conf).items
     single, late, bank = MetricFilter(model), MetricFilter(model), MetricFilter(model, filters=3)
-    single.reset()
-    bank.reset([0, 1])
+    single.start()
+    bank.start([0, 1])
     for j, (direction, yaw) in enumerate(steps):
         if j == 40:
-            late.reset()
-            bank.reset(2)
+            late.start()
+            bank.start(2)
         for f in (single, bank) + ((late,) if j >= 40 else ()):
             f.update(direction, yaw)
         answers = bank.answers()
@@ -95,7 +95,7 @@ def test_filters_started_together_or_later_agree_with_a_single_filter(grid):
             want = reference.answer()
             assert (answers[b].edge, answers[b].cell) == (want.edge, want.cell)
             assert answers[b].confidence == pytest.approx(want.confidence, rel=1e-9, abs=1e-12)
-    assert (bank.trace(2) == late.trace()).all()
+    assert (bank.path(2) == late.path()).all()
 
 
 def test_filter_max_is_the_largest_entry_of_each_filter(grid):

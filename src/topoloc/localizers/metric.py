@@ -37,7 +37,7 @@ class MetricLocalizer(RoadLocalizer):
         return Observations(list(zip(steps.direction.tolist(), steps.yaw.tolist())), steps.frame)
 
     def start(self) -> None:
-        self.filter.reset()
+        self.filter.start()
 
     def update(self, observation: tuple[int, float]) -> Answer:
         direction, yaw = observation
@@ -63,19 +63,19 @@ class MetricLocalizer(RoadLocalizer):
         for j in range(len(steps)):
             fresh = np.flatnonzero(first == j)
             if len(fresh):
-                bank.reset(fresh)
+                bank.start(fresh)
             bank.update(int(steps.direction[j]), float(steps.yaw[j]))
             for b, est in enumerate(bank.answers()):
                 if first[b] <= j:
                     answers[b].append(Answer(est.edge, est.confidence, tuple(est.xy) if est.edge >= 0 else None))
         out = []
         for b, start in enumerate(starts):
-            cells = bank.trace(b)
+            cells = bank.path(b)
             path = np.where(cells >= 0, bank.grid.edge[np.maximum(cells, 0)], -1)
             items = list(zip(steps.direction[first[b]:].tolist(), steps.yaw[first[b]:].tolist()))
             out.append((int(start), Observations(items, steps.frame[first[b]:]), Track.of_answers(answers[b], path)))
         return out
 
     def path(self) -> np.ndarray | None:
-        cells = self.filter.trace(0)
+        cells = self.filter.path(0)
         return np.where(cells >= 0, self.filter.grid.edge[np.maximum(cells, 0)], -1) if len(cells) else None

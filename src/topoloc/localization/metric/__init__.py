@@ -35,7 +35,7 @@ self-localization", CVPR 2013; PAMI 2016), on our cells (:mod:`topoloc.localizat
 
 The online answer after each step is the road (undirected edge) with the largest probability,
 its best cell (position) and that probability (confidence). The filter also traces a consistent
-path back (:meth:`~topoloc.localization.metric.dense_filter.MetricFilter.trace`).
+path back (:meth:`~topoloc.localization.metric.dense_filter.MetricFilter.path`).
 
 The modules of this package:
 

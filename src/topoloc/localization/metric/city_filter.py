@@ -17,7 +17,8 @@ belief summed into coarse cells, and the coarse filter spreads the returning mas
 
 Maps of at most ``coarse_min_cells`` cells (every map before city scale) never use the coarse phase: the
 answers are the dense filter's, bit for bit. :class:`CityFilter` has the interface of
-:class:`MetricFilter` that the localizer uses (``reset``, ``update``, ``answers``, ``answer``, ``trace``).
+:class:`MetricFilter` that the localizer uses (the :class:`topoloc.localizer.Filter` methods ``start``,
+``update``, ``answer`` and ``path``, and ``answers``).
 """
 
 from __future__ import annotations
@@ -78,16 +79,16 @@ class CityFilter:
 
     # -- life cycle ------------------------------------------------------------------------------------------
 
-    def reset(self, which: int | NDArray[np.int64] | None = None) -> None:
+    def start(self, which: int | NDArray[np.int64] | None = None) -> None:
         """(Re)start filters ``which`` (default: all), uniform over the map; on a city map in the coarse phase."""
         which = np.arange(self.filters) if which is None else np.atleast_1d(np.asarray(which, np.int64))
         if self.coarse is None:
-            self.fine.reset(which)
+            self.fine.start(which)
             return
         self.fine.stop(which)
         for b in which:
             self.fine.history[int(b)] = []
-        self.coarse.reset(which)
+        self.coarse.start(which)
         self.in_coarse[which] = True
         self._coarse_answers = None
 
@@ -170,11 +171,11 @@ class CityFilter:
         """The answer of filter ``which``."""
         return self.answers()[which]
 
-    def trace(self, which: int = 0) -> NDArray[np.int64]:
+    def path(self, which: int = 0) -> NDArray[np.int64]:
         """Filter ``which``'s path traced back (fine cells; -1 throughout while it is still in the coarse phase)."""
         if self.in_coarse[which]:
             return np.full(len(self.fine.history[which]), -1, np.int64)
-        return self.fine.trace(which)
+        return self.fine.path(which)
 
     def belief(self, which: int = 0) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
         """Filter ``which``'s belief: map positions (n, 2) of its cells, their probabilities, the off-map probability."""
