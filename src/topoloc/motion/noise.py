@@ -12,9 +12,11 @@ and integrated from the true first pose: the step from frame ``k`` to ``k + 1`` 
 heading of frame ``k + 1``, as the truth does. The random draws are, in this order, the distance noise
 of every step, then the heading noise of every step.
 
-Users: :mod:`topoloc.odometry.simulate` (``odometry.simulated.noise``), :mod:`topoloc.place.odometry`
-(``place.odometry_noise``: the scale error drawn per drive) and :mod:`topoloc.odometry.simulate`
-(parameters drawn per drive from a noise level).
+Every noise setting of the config has the keys of :data:`NOISE_KEYS`. Users:
+:func:`topoloc.odometry.simulate.simulate_drive` (``odometry.simulated.noise``),
+:func:`topoloc.odometry.simulate.simulate_pattern_drive` and :mod:`topoloc.trajectory.drives` (parameters
+drawn per drive from ranges, ``dataset.simulated.noise``), :mod:`topoloc.place.odometry`
+(``place.odometry_noise``: the scale error drawn per drive from ``N(0, scale_error^2)``).
 """
 
 from __future__ import annotations
