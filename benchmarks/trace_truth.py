@@ -4,7 +4,7 @@
         [--maxlen M] [--set localization.metric.KEY=VALUE ...]
 
 The drive is the ``--drive``-th of ``bench_city.py`` for that map and level (same seeds). All starts run in
-one :class:`~topoloc.localization.city_filter.CityFilter` as in the evaluation; after every step each
+one :class:`~topoloc.localization.metric.city_filter.CityFilter` as in the evaluation; after every step each
 start's probability of the true road (the roads of the frames within 8 of the step's), its phase (coarse or
 full grid), its entries and its answer are recorded. Prints per start the oracle's limit, the distance to
 localized, where it handed over, whether the truth's probability ever reached zero, and the figures at a few
@@ -22,12 +22,13 @@ from bench_city import MAPS
 from bench_simulated import load_conf
 
 from topoloc.graph.build_graph import build_road_graph
-from topoloc.localization.city_filter import CityFilter
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start, start_frames
-from topoloc.localization.metric import odometry_steps
+from topoloc.localization.metric.city_filter import CityFilter
+from topoloc.localization.metric.odometry_steps import odometry_steps
 from topoloc.localization.oracle import Oracle, true_path
-from topoloc.localization.roadmap import Odometry, RoadMap
-from topoloc.localization.simulation import NOISE_LEVELS, simulate
+from topoloc.localization.roadmap import RoadMap
+from topoloc.motion.poses import Odometry
+from topoloc.odometry.simulate import NOISE_LEVELS, simulate_pattern_drive
 from topoloc.registry import make
 
 
@@ -52,11 +53,11 @@ def main(argv: list[str] | None = None) -> int:
     rng = np.random.default_rng([0, list(MAPS).index(a.map), ["low", "medium"].index(a.level)])
     for _ in range(a.drive + 1):  # the drives of bench_city.py, in its order
         length = float(np.exp(rng.uniform(np.log(3000.0), np.log(10000.0))))
-        sim = simulate(graph, length, NOISE_LEVELS[a.level], rng, "random")
+        sim = simulate_pattern_drive(graph, length, NOISE_LEVELS[a.level], rng, "random")
     driven = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(sim.gt_xy, axis=0).T))])
     cut = int(np.searchsorted(driven, a.maxlen))
     truth = DriveTruth(sim.edge[:cut], sim.gt_xy[:cut], driven[:cut])
-    odo = Odometry(sim.odo_xy[:cut], sim.odo_yaw[:cut])
+    odo = Odometry(sim.odometry.xy[:cut], sim.odometry.yaw[:cut])
     print(f"drive {truth.driven[-1]:.0f} m, noise {sim.noise}", flush=True)
     oracle = Oracle(graph, road.states, ev["oracle"]["angle_tol_deg"], ev["oracle"]["length_tol"])
     judge = Judge(graph, ev["node_tolerance_m"])
@@ -72,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     for j in range(n):
         fresh = np.flatnonzero(first == j)
         if len(fresh):
-            bank.reset(fresh)
+            bank.start(fresh)
         bank.update(int(steps.direction[j]), float(steps.yaw[j]))
         fr = min(int(steps.frame[j]), len(truth.edge) - 1)
         near = np.unique(truth.edge[max(0, fr - 8):fr + 8])

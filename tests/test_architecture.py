@@ -1,9 +1,11 @@
 """The layers of docs/architecture.md, enforced: every module of src/topoloc imports only its own or lower layers,
-never a stage module, and never a topoloc module inside a function (which would hide a cycle)."""
+never a stage module, and never a topoloc module inside a function (which would hide a cycle); and the packages
+of src/topoloc import each other without a cycle (two packages of one layer included)."""
 
 from __future__ import annotations
 
 import ast
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -119,6 +121,69 @@ def check(root: Path, scripts: Path, package: str = "topoloc", layers: dict[str,
     return sorted(set(found), key=str)  # one per module, import and reason
 
 
+def package_imports(root: Path, package: str = "topoloc") -> dict[tuple[str, str], list[str]]:
+    """(importing, imported) top-level subpackage or module of ``package`` -> the modules whose imports make
+    that edge (``localization.decode_trajectories -> trajectory.model``); imports inside a package are no edge."""
+    modules = module_names(root, package)
+    edges: dict[tuple[str, str], list[str]] = {}
+    for module, path in modules.items():
+        for imported, _, _ in _imports(ast.parse(path.read_text()), module, path.name == "__init__.py", package):
+            while imported not in modules and "." in imported:
+                imported = imported.rsplit(".", 1)[0]
+            if not module or not imported or imported not in modules:
+                continue
+            a, b = module.split(".")[0], imported.split(".")[0]
+            if a != b and f"{module} -> {imported}" not in edges.get((a, b), []):
+                edges.setdefault((a, b), []).append(f"{module} -> {imported}")
+    return edges
+
+
+def import_cycles(edges: Iterable[tuple[str, str]]) -> list[list[str]]:
+    """The sets of nodes that import each other in a cycle (strongly connected components of more than
+    one node), each sorted, in name order (Tarjan's algorithm)."""
+    graph: dict[str, list[str]] = {}
+    for a, b in edges:
+        graph.setdefault(a, []).append(b)
+        graph.setdefault(b, [])
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def visit(node: str) -> None:
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        for nxt in graph[node]:
+            if nxt not in index:
+                visit(nxt)
+                low[node] = min(low[node], low[nxt])
+            elif nxt in stack:
+                low[node] = min(low[node], index[nxt])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                member = stack.pop()
+                component.append(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return sorted(found)
+
+
+def describe_cycles(edges: dict[tuple[str, str], list[str]]) -> list[str]:
+    """One line per package cycle: its packages and the module imports that close it."""
+    lines = []
+    for cycle in import_cycles(edges):
+        inside = [f"{a} -> {b} ({', '.join(edges[a, b][:3])})" for (a, b) in sorted(edges) if a in cycle and b in cycle]
+        lines.append(f"packages {' <-> '.join(cycle)} import each other: " + "; ".join(inside))
+    return lines
+
+
 def test_the_stages_come_from_the_workflow_scripts():
     stages = stage_modules(REPO / "workflow" / "scripts", "topoloc")
     assert {"graph.build_graph", "odometry.segment_trajectory", "place.localize_repeat", "trajectory.train_rnn"} <= stages
@@ -135,6 +200,22 @@ def test_every_module_has_a_layer():
 def test_src_follows_the_layers():
     violations = check(REPO / "src" / "topoloc", REPO / "workflow" / "scripts")
     assert not violations, "\n".join(map(str, violations))
+
+
+def test_no_two_packages_import_each_other():
+    edges = package_imports(REPO / "src" / "topoloc")
+    assert ("localizers", "localization") in edges  # the graph is built from the real imports
+    cycles = describe_cycles(edges)
+    assert not cycles, "\n".join(cycles)
+
+
+@pytest.mark.parametrize(("edges", "cycles"), [
+    ([("a", "b"), ("b", "c"), ("a", "c")], []),
+    ([("a", "b"), ("b", "a"), ("b", "c")], [["a", "b"]]),
+    ([("a", "b"), ("b", "c"), ("c", "a"), ("d", "e"), ("e", "d"), ("c", "d")], [["a", "b", "c"], ["d", "e"]]),
+])
+def test_the_cycle_finder(edges, cycles):
+    assert import_cycles(edges) == cycles
 
 
 @pytest.fixture
@@ -175,3 +256,14 @@ def test_the_checker_catches_a_violation(tiny, module, text, why):
     (root / module).write_text(text)
     violations = check(root, scripts, "pkg", layers)
     assert len(violations) == 1 and why in violations[0].why, violations
+
+
+def test_the_checker_catches_a_package_cycle(tiny):
+    root, _, _ = tiny
+    (root / "other").mkdir()
+    (root / "other" / "__init__.py").write_text("")
+    (root / "other" / "mod.py").write_text("from pkg.lib.util import y\n")
+    assert describe_cycles(package_imports(root, "pkg")) == []
+    (root / "lib" / "util.py").write_text("from pkg.core import x\nfrom pkg.other import mod\n")
+    assert describe_cycles(package_imports(root, "pkg")) == [
+        "packages lib <-> other import each other: lib -> other (lib.util -> other.mod); other -> lib (other.mod -> lib.util)"]

@@ -34,10 +34,11 @@ from topoloc.config import load
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
-from topoloc.localization.localize import check_explained, check_on_map, write_geojson
-from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.localization.drive_on_map import check_explained, check_on_map, write_geojson
+from topoloc.localization.roadmap import RoadMap
 from topoloc.localizer import ROAD_OBSERVATIONS
 from topoloc.motion.georef import fit_rigid, from_origin, grid_heading_deg, to_map
+from topoloc.motion.poses import Odometry
 from topoloc.motion.poses import planar_yaw, read_gps, read_poses
 from topoloc.registry import check_names, make, registry
 from topoloc.trajectory.model import load_model

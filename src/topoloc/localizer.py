@@ -16,6 +16,10 @@ A localizer answers, one observation at a time, where the vehicle is:
 :class:`Track`. Subclasses may override :meth:`Localizer.run` with a faster equivalent (the tests check
 that both agree).
 
+Every filter inside a localizer (the metric filter, the token HMM, the beam decoder, the place filters)
+follows :class:`Filter`, the same vocabulary without a map: ``start``, ``update``, ``answer``, and ``path``
+where it traces one back.
+
 Localizers register themselves by name with :func:`register`; the name is the config key, the CLI
 choice and the table row, :attr:`Localizer.label` the label of tables and figures. Every module of the
 package :mod:`topoloc.localizers` is imported by :func:`topoloc.registry.registry`, so a new localizer is one module
@@ -27,7 +31,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -74,6 +78,28 @@ class Track:
         xy = np.array([a.xy if a.xy is not None else (np.nan, np.nan) for a in answers], float).reshape(-1, 2)
         return cls(state, np.array([a.confidence for a in answers], float), xy,
                    state.copy() if path is None else np.asarray(path, np.int64), dict(extra))
+
+
+@runtime_checkable
+class Filter(Protocol):
+    """A recursive filter, one observation at a time (the vocabulary of every filter, as of :class:`Localizer`).
+
+    * ``start()`` forgets every observation: the belief before the first one (multi-start filters take
+      which starts);
+    * ``update(*observation)`` takes the next observation (motion, then evidence) and returns the new answer;
+    * ``answer()`` returns the answer after the last update;
+    * ``path()``, where a filter traces one back, returns the consistent sequence of states of the updates
+      so far; ``run(observations)``, where a filter has one, is the batch form (``start``, ``update`` each).
+    """
+
+    def start(self) -> None:
+        """Forget every observation."""
+
+    def update(self, *observation: Any) -> Any:
+        """Take the next observation; return the new answer."""
+
+    def answer(self) -> Any:
+        """The answer after the last update."""
 
 
 class Localizer(ABC):

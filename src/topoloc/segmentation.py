@@ -10,7 +10,9 @@ test tokens share one convention; :func:`encode_track` also gives each token's p
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -167,3 +169,13 @@ def token_features(track: EncodedTrack, yaw: NDArray[np.float64], spacing_m: flo
     at = unwrapped[np.asarray(track.frame)]
     change = np.degrees(np.diff(at, prepend=unwrapped[0])) / 90.0
     return np.column_stack([distance, turn, change]).astype(np.float32)
+
+
+def encode_odometry(xy: NDArray[np.float64], yaw: NDArray[np.float64], spacing_m: float, bins: int,
+                    conf: Mapping[str, Any]) -> tuple[EncodedTrack, NDArray[np.float32]]:
+    """An odometry track ``xy`` / ``yaw`` segmented and encoded as the ``segment_trajectory`` stage does it
+    (``conf``: the ``segmentation`` and ``encoding`` slices), and its tokens' :func:`token_features`."""
+    seg, enc = conf["segmentation"], conf["encoding"]
+    track = encode_track(xy, spacing_m, bins, float(seg["tolerance_m"]), float(enc["heading_lookahead_m"]),
+                         float(seg["turn_label_offset_m"]), float(seg["corner_skip_m"]))
+    return track, token_features(track, yaw, spacing_m)

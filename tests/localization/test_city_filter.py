@@ -10,11 +10,12 @@ from localization_helpers import irregular_grid
 from test_metric import NOISELESS, score
 
 from topoloc.config import load
-from topoloc.localization.city_filter import CityFilter, coarse_settings, uses_coarse
-from topoloc.localization.metric import MetricModel, MetricSettings
-from topoloc.localization.metric_filter import MetricFilter
-from topoloc.localization.roadmap import Odometry, RoadMap
-from topoloc.localization.simulation import NOISE_LEVELS, simulate
+from topoloc.localization.metric.city_filter import CityFilter, coarse_settings, uses_coarse
+from topoloc.localization.metric.dense_filter import MetricFilter
+from topoloc.localization.metric.map_model import MetricModel, MetricSettings
+from topoloc.localization.roadmap import RoadMap
+from topoloc.motion.poses import Odometry
+from topoloc.odometry.simulate import NOISE_LEVELS, simulate_pattern_drive
 from topoloc.registry import make
 
 
@@ -33,7 +34,7 @@ def coarse_conf(conf: dict, handoff: int = 400) -> dict:
 
 def run(road, conf, sim):
     localizer = make("metric")
-    observations = localizer.observe(Odometry(sim.odo_xy, sim.odo_yaw), road, conf)
+    observations = localizer.observe(sim.odometry, road, conf)
     localizer.reset(road, conf)
     track = localizer.run(observations.items)
     return localizer, observations, track
@@ -44,23 +45,23 @@ def test_small_maps_run_the_dense_filter_unchanged(grid):
     settings = MetricSettings.from_conf(conf["localization"]["metric"])
     model = MetricModel(graph, road.states, settings)
     assert not uses_coarse(settings, model.num_cells) and uses_coarse(settings, 10**6)
-    sim = simulate(graph, 500.0, NOISE_LEVELS["medium"], np.random.default_rng(7))
-    steps = make("metric").observe(Odometry(sim.odo_xy, sim.odo_yaw), road, conf).items
+    sim = simulate_pattern_drive(graph, 500.0, NOISE_LEVELS["medium"], np.random.default_rng(7))
+    steps = make("metric").observe(sim.odometry, road, conf).items
     dense, city = MetricFilter(model), CityFilter(model, None)
-    dense.reset()
-    city.reset()
+    dense.start()
+    city.start()
     for direction, yaw in steps:
         dense.update(direction, yaw)
         city.update(direction, yaw)
         a, b = dense.answer(), city.answer()
         assert (a.edge, a.cell, a.confidence) == (b.edge, b.cell, b.confidence)
-    assert (dense.trace() == city.trace()).all()
+    assert (dense.path() == city.path()).all()
 
 
 @pytest.mark.parametrize("level, seed", [("none", 1), ("medium", 2), ("high", 3)])
 def test_coarse_phase_gives_the_dense_filters_answers(grid, level, seed):
     graph, road, conf = grid
-    sim = simulate(graph, 1500.0, NOISELESS if level == "none" else NOISE_LEVELS[level], np.random.default_rng(seed))
+    sim = simulate_pattern_drive(graph, 1500.0, NOISELESS if level == "none" else NOISE_LEVELS[level], np.random.default_rng(seed))
     _, observations, dense = run(road, conf, sim)
     localizer, _, city = run(road, coarse_conf(conf), sim)
     assert localizer.coarse_model is not None and localizer.coarse_model.settings.cell_m == 8.0
@@ -82,9 +83,9 @@ def test_coarse_phase_hands_over_and_back(grid):
     assert coarse.num_cells * 3 < fine.num_cells
     assert (np.bincount(bank.coarse_of, minlength=coarse.num_cells) > 0).all()  # every coarse cell covers fine cells
     assert np.allclose(np.bincount(bank.coarse_of, weights=bank.share), 1.0)
-    sim = simulate(graph, 1200.0, NOISE_LEVELS["medium"], np.random.default_rng(4))
-    steps = make("metric").observe(Odometry(sim.odo_xy, sim.odo_yaw), road, conf).items
-    bank.reset([0, 1])
+    sim = simulate_pattern_drive(graph, 1200.0, NOISE_LEVELS["medium"], np.random.default_rng(4))
+    steps = make("metric").observe(sim.odometry, road, conf).items
+    bank.start([0, 1])
     phases = []
     for direction, yaw in steps:
         bank.update(direction, yaw)
@@ -93,15 +94,15 @@ def test_coarse_phase_hands_over_and_back(grid):
         assert abs(weight.sum() + offmap - 1.0) < 1e-4
     phases = np.array(phases)
     assert phases[0].all() and not phases[-1].any()  # coarse at first, fine once the belief narrowed
-    assert len(bank.trace(0)) == len(steps) and (bank.trace(0)[-50:] >= 0).all()
+    assert len(bank.path(0)) == len(steps) and (bank.path(0)[-50:] >= 0).all()
 
     # then the drive leaves the map (turns of 40 degrees every 15 m, which no road makes): the fine filter gets
     # lost and goes back to coarse cells
-    yaw = sim.odo_yaw[-1] + np.radians(40.0) * np.where((np.arange(400) // 15) % 2 == 0, 1.0, -1.0)
-    xy = sim.odo_xy[-1] + np.cumsum(np.column_stack([np.cos(yaw), np.sin(yaw)]), axis=0)
-    odometry = Odometry(np.vstack([sim.odo_xy, xy]), np.concatenate([sim.odo_yaw, yaw]))
+    yaw = sim.odometry.yaw[-1] + np.radians(40.0) * np.where((np.arange(400) // 15) % 2 == 0, 1.0, -1.0)
+    xy = sim.odometry.xy[-1] + np.cumsum(np.column_stack([np.cos(yaw), np.sin(yaw)]), axis=0)
+    odometry = Odometry(np.vstack([sim.odometry.xy, xy]), np.concatenate([sim.odometry.yaw, yaw]))
     lost = CityFilter(fine, coarse)
-    lost.reset()
+    lost.start()
     phases, sure = [], []
     for direction, yaw in make("metric").observe(odometry, road, conf).items:
         lost.update(direction, yaw)
@@ -128,12 +129,12 @@ def test_handed_over_belief_is_the_coarse_one_at_that_step(grid):
         to_fine(b)
 
     bank._to_fine = record
-    sim = simulate(graph, 1000.0, NOISE_LEVELS["low"], np.random.default_rng(5))
-    steps = make("metric").observe(Odometry(sim.odo_xy, sim.odo_yaw), road, conf).items
+    sim = simulate_pattern_drive(graph, 1000.0, NOISE_LEVELS["low"], np.random.default_rng(5))
+    steps = make("metric").observe(sim.odometry, road, conf).items
     checked = 0
     for j, (direction, yaw) in enumerate(steps):
         if j in (0, 5, 11):  # starts at several phases of the coarse steps
-            bank.reset([0, 5, 11].index(j))
+            bank.start([0, 5, 11].index(j))
         handed.clear()
         bank.update(direction, yaw)
         for b, coarse_weight in handed.items():
@@ -153,13 +154,13 @@ def test_coarse_answers_kept_between_coarse_steps_are_the_current_ones(grid):
     fine = MetricModel(graph, road.states, settings)
     coarse = MetricModel(graph, road.states, coarse_settings(settings))
     kept, fresh = CityFilter(fine, coarse, filters=3), CityFilter(fine, coarse, filters=3)
-    sim = simulate(graph, 800.0, NOISE_LEVELS["medium"], np.random.default_rng(6))
-    steps = make("metric").observe(Odometry(sim.odo_xy, sim.odo_yaw), road, conf).items
+    sim = simulate_pattern_drive(graph, 800.0, NOISE_LEVELS["medium"], np.random.default_rng(6))
+    steps = make("metric").observe(sim.odometry, road, conf).items
     phases = []
     for j, (direction, yaw) in enumerate(steps):
         if j in (0, 3, 9):
-            kept.reset([0, 3, 9].index(j))
-            fresh.reset([0, 3, 9].index(j))
+            kept.start([0, 3, 9].index(j))
+            fresh.start([0, 3, 9].index(j))
         kept.update(direction, yaw)
         fresh.update(direction, yaw)
         fresh._coarse_answers = None  # what an uncached filter would answer

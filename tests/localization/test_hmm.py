@@ -26,7 +26,7 @@ def test_hmm_recovers_a_noiseless_route_on_a_grid():
     tokens, labels = route_tokens(graph, edges, [0, 1, 6, 7, 8, 13, 14, 9, 4])
     states = directed_edges(graph)
     hmm = CellHMM(graph, states, 20, PARAMS)
-    dec = hmm.decode(tokens)
+    dec = hmm.run(tokens)
     assert dec.path.tolist() == labels.tolist()  # the Viterbi path is the route, from the first step
     assert consecutive_connected(states, dec.path).all()
     distance = 20.0 * np.arange(len(tokens))

@@ -12,8 +12,9 @@ from topoloc.errors import InputError
 from topoloc.localization.decoders import beam_decode
 from topoloc.localization.hmm import CellHMM, HmmParams
 from topoloc.localization.rnn import edge_log_probs
-from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.localization.roadmap import RoadMap
 from topoloc.localizer import Answer, Localizer, register
+from topoloc.motion.poses import Odometry
 from topoloc.registry import check_names, make, registry
 from topoloc.trajectory.model import TrajectoryRNN
 
@@ -74,7 +75,7 @@ def test_hmm_localizer_online_equals_the_batch_decode(setting):
     localizer = make("hmm")
     localizer.reset(road, conf)
     track = localizer.run(tokens)
-    batch = CellHMM(graph, road.states, 20, HmmParams.from_conf(conf["localization"]["hmm"])).decode(np.asarray(tokens))
+    batch = CellHMM(graph, road.states, 20, HmmParams.from_conf(conf["localization"]["hmm"])).run(np.asarray(tokens))
     assert track.state.tolist() == batch.online.tolist() and track.path.tolist() == batch.path.tolist()
     assert np.allclose(track.confidence, batch.confidence)
     assert np.isfinite(track.xy).all()  # the HMM's cells give a position

@@ -9,10 +9,11 @@ from trajectory_helpers import random_graph
 
 from topoloc.config import load
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start
-from topoloc.localization.metric import MetricModel, MetricSettings
-from topoloc.localization.metric_filter import MetricFilter
-from topoloc.localization.roadmap import Odometry, RoadMap
-from topoloc.localization.simulation import NOISE_LEVELS, NoiseLevel, simulate
+from topoloc.localization.metric.dense_filter import MetricFilter
+from topoloc.localization.metric.map_model import MetricModel, MetricSettings
+from topoloc.localization.roadmap import RoadMap
+from topoloc.motion.poses import Odometry
+from topoloc.odometry.simulate import NOISE_LEVELS, NoiseLevel, simulate_pattern_drive
 from topoloc.registry import make
 
 NOISELESS = NoiseLevel("none", (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))
@@ -40,8 +41,8 @@ def score(graph, sim, observations, track):
 @pytest.mark.parametrize("level, seed", [("none", 1), ("high", 2)])
 def test_localizes_a_simulated_drive(grid, level, seed):
     graph, road, conf = grid
-    sim = simulate(graph, 1500.0, NOISELESS if level == "none" else NOISE_LEVELS[level], np.random.default_rng(seed))
-    observations, track = run_metric(road, conf, sim.odo_xy, sim.odo_yaw)
+    sim = simulate_pattern_drive(graph, 1500.0, NOISELESS if level == "none" else NOISE_LEVELS[level], np.random.default_rng(seed))
+    observations, track = run_metric(road, conf, sim.odometry.xy, sim.odometry.yaw)
     m = score(graph, sim, observations, track)
     assert m["localized_m"] < 600.0, m
     assert m["accuracy_after"] >= 0.97 and m["position_error_m"] <= 3.0 and m["confident_wrong"] <= 0.02, m
@@ -50,9 +51,9 @@ def test_localizes_a_simulated_drive(grid, level, seed):
 
 def test_stop_and_reverse(grid):
     graph, road, conf = grid
-    sim = simulate(graph, 1500.0, NOISE_LEVELS["medium"], np.random.default_rng(3), pattern="stop_reverse", stop_frames=3000)
-    assert (np.diff(sim.odo_xy, axis=0) == 0).all(axis=1).sum() >= 3000  # five minutes standing still at 10 Hz
-    observations, track = run_metric(road, conf, sim.odo_xy, sim.odo_yaw)
+    sim = simulate_pattern_drive(graph, 1500.0, NOISE_LEVELS["medium"], np.random.default_rng(3), pattern="stop_reverse", stop_frames=3000)
+    assert (np.diff(sim.odometry.xy, axis=0) == 0).all(axis=1).sum() >= 3000  # five minutes standing still at 10 Hz
+    observations, track = run_metric(road, conf, sim.odometry.xy, sim.odometry.yaw)
     back = np.array([d for d, _ in observations.items]) < 0
     assert 5 <= back.sum() <= 10  # the 15 m driven backwards: about seven steps of 2 m back
     m = score(graph, sim, observations, track)
@@ -68,8 +69,8 @@ def test_unsure_on_a_drive_the_map_cannot_explain(grid):
     assert (track.confidence[observations.frame > 150] < 0.5).all()
     # a drive on another map (random junctions and lengths): no confident wrong answer
     other = random_graph(4, n=16, extra=8)
-    sim = simulate(other, 1200.0, NOISE_LEVELS["low"], np.random.default_rng(4))
-    observations, track = run_metric(road, conf, sim.odo_xy, sim.odo_yaw)
+    sim = simulate_pattern_drive(other, 1200.0, NOISE_LEVELS["low"], np.random.default_rng(4))
+    observations, track = run_metric(road, conf, sim.odometry.xy, sim.odometry.yaw)
     assert np.mean(track.confidence >= 0.9) <= 0.02
 
 
@@ -77,16 +78,16 @@ def test_filters_started_together_or_later_agree_with_a_single_filter(grid):
     graph, road, conf = grid
     settings = MetricSettings.from_conf(conf["localization"]["metric"])
     model = MetricModel(graph, road.states, settings)
-    sim = simulate(graph, 600.0, NOISE_LEVELS["medium"], np.random.default_rng(5))
+    sim = simulate_pattern_drive(graph, 600.0, NOISE_LEVELS["medium"], np.random.default_rng(5))
     localizer = make("metric")
-    steps = localizer.observe(Odometry(sim.odo_xy, sim.odo_yaw), road, conf).items
+    steps = localizer.observe(sim.odometry, road, conf).items
     single, late, bank = MetricFilter(model), MetricFilter(model), MetricFilter(model, filters=3)
-    single.reset()
-    bank.reset([0, 1])
+    single.start()
+    bank.start([0, 1])
     for j, (direction, yaw) in enumerate(steps):
         if j == 40:
-            late.reset()
-            bank.reset(2)
+            late.start()
+            bank.start(2)
         for f in (single, bank) + ((late,) if j >= 40 else ()):
             f.update(direction, yaw)
         answers = bank.answers()
@@ -94,7 +95,7 @@ def test_filters_started_together_or_later_agree_with_a_single_filter(grid):
             want = reference.answer()
             assert (answers[b].edge, answers[b].cell) == (want.edge, want.cell)
             assert answers[b].confidence == pytest.approx(want.confidence, rel=1e-9, abs=1e-12)
-    assert (bank.trace(2) == late.trace()).all()
+    assert (bank.path(2) == late.path()).all()
 
 
 def test_filter_max_is_the_largest_entry_of_each_filter(grid):

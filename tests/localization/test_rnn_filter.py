@@ -10,7 +10,8 @@ from localization_helpers import irregular_grid
 from topoloc.config import load
 from topoloc.errors import InputError
 from topoloc.localization.rnn import OnlineRNN, edge_log_probs
-from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.localization.roadmap import RoadMap
+from topoloc.motion.poses import Odometry
 from topoloc.registry import make, registry
 from topoloc.trajectory.model import TrajectoryRNN
 
@@ -37,7 +38,7 @@ def test_observations_carry_features_and_the_online_rnn_equals_the_batch(setting
     inputs = np.stack([f for _, f in obs.items])
     assert inputs.shape == (len(tokens), 3) and inputs[:, 0].sum() * graph.virtual_node_spacing_m == pytest.approx(740, rel=0.05)
     online = OnlineRNN(model)
-    steps = np.stack([online.step(int(t), f) for t, f in zip(tokens, inputs)])
+    steps = np.stack([online.update(int(t), f) for t, f in zip(tokens, inputs)])
     assert np.allclose(steps, edge_log_probs(model, tokens, inputs=inputs), atol=1e-5)
     assert not np.allclose(steps, edge_log_probs(model, tokens))  # without the features the outputs differ
 

@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+import yaml
 
-from topoloc.motion.noise import OdometryNoise, integrate_odometry
+import topoloc
+
+from topoloc.motion.noise import NOISE_KEYS, OdometryNoise, integrate_odometry
+from topoloc.motion.poses import Odometry
 
 # 20 m east, then 10 m north, a frame per metre; heading = direction of travel.
 XY = np.concatenate([np.column_stack([np.arange(21.0), np.zeros(21)]), np.column_stack([np.full(10, 20.0), np.arange(1.0, 11.0)])])
@@ -39,3 +45,31 @@ def test_from_dict_takes_the_config_keys():
     assert OdometryNoise.from_dict(keys) == OdometryNoise(0.02, 0.01, 0.5, 0.05)
     with pytest.raises(KeyError):
         OdometryNoise.from_dict({"scale_error": 0.02})
+
+
+def test_the_noisy_track_is_the_one_odometry_type_and_cuts_with_its_distances():
+    track = integrate_odometry(XY, YAW, OdometryNoise(0.1, 0.0, 0.0, 0.0), np.random.default_rng(0))
+    assert isinstance(track, Odometry) and len(track) == len(XY)
+    later = track.cut(5)
+    assert np.array_equal(later.xy, track.xy[5:]) and np.array_equal(later.yaw, track.yaw[5:])
+    assert later.ds[0] == 0.0 and np.array_equal(later.ds[1:], track.ds[6:])
+    assert later.driven_m[-1] == pytest.approx(track.ds[6:].sum())
+
+
+def _noise_settings(node: object, where: str = "") -> dict[str, set[str]]:
+    """Every object of the config schema that holds an odometry noise setting (a ``distance_noise`` key)."""
+    found = {}
+    if isinstance(node, dict):
+        props = node.get("properties")
+        if isinstance(props, dict) and "distance_noise" in props:
+            found[where] = set(props)
+        for key, value in node.items():
+            found |= _noise_settings(value, f"{where}.{key}" if key != "properties" else where)
+    return found
+
+
+def test_every_noise_setting_of_the_config_has_the_one_set_of_keys():
+    schema = yaml.safe_load((Path(topoloc.__file__).parent / "config.schema.yaml").read_text())
+    settings = _noise_settings(schema)
+    assert {".odometry.simulated.noise", ".dataset.simulated.noise", ".place.odometry_noise"} <= set(settings)
+    assert all(keys == set(NOISE_KEYS) for keys in settings.values()), settings

@@ -11,8 +11,9 @@ from trajectory_helpers import random_graph
 from tests.conftest import make_config
 from topoloc.errors import InputError
 from topoloc.geometry import bin_centre, straight_token
-from topoloc.localization.roadmap import Odometry, RoadMap, token_observations
-from topoloc.localization.simulation import simulate
+from topoloc.localization.roadmap import RoadMap, token_observations
+from topoloc.motion.poses import Odometry
+from topoloc.odometry.simulate import simulate_pattern_drive
 from topoloc.trajectory.dataset import load_features, load_sequences, load_state_targets
 from topoloc.trajectory.drives import noise_level, training_drives
 from topoloc.trajectory.evaluate_rnn import (
@@ -58,8 +59,8 @@ def test_training_drives_have_the_token_statistics_of_test_drives():
     road, rng = RoadMap(graph), np.random.default_rng(7)
     test_tokens, test_metres = [], 0.0
     for _ in range(40):
-        drive = simulate(graph, float(rng.uniform(300, 600)), noise_level(NOISE), rng)
-        obs = token_observations(Odometry(drive.odo_xy, drive.odo_yaw), road, conf, 20)
+        drive = simulate_pattern_drive(graph, float(rng.uniform(300, 600)), noise_level(NOISE), rng)
+        obs = token_observations(Odometry(drive.odometry.xy, drive.odometry.yaw), road, conf, 20)
         test_tokens.append(np.asarray(obs.items))
         test_metres += drive.length_m
     rate_a, share_a, turn_a, left_a = token_stats([d.tokens for d in train], sum(d.length_m for d in train))

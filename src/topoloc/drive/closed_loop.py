@@ -261,7 +261,7 @@ def run_episode(sim: Simulator, agent: Any, localization: Any, topo: TopometricM
     rng = np.random.default_rng([seed, 53])
     lateral = float(rng.uniform(-1, 1) * follow["start_lateral_m"])
     yaw = float(rng.uniform(-1, 1) * follow["start_yaw_deg"])
-    scale = 1.0 + float(rng.normal(0.0, float(noise["scale_error_std"])))
+    scale = 1.0 + float(rng.normal(0.0, float(noise["scale_error"])))
     color = bool(place["image"]["color"])
     threshold, lost, slow = float(place["localize"]["threshold"]), int(follow["lost_steps"]), float(follow["slow_mps"])
     gain = float(drive["expert"]["speed_gain"])

@@ -24,10 +24,11 @@ import pandas as pd
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json
+from topoloc.localization.drive_on_map import write_geojson
 from topoloc.localization.evaluation import DriveTruth, start_frames
-from topoloc.localization.localize import write_geojson
-from topoloc.localization.roadmap import Odometry, RoadMap
+from topoloc.localization.roadmap import RoadMap
 from topoloc.localizer import ROAD_OBSERVATIONS
+from topoloc.motion.poses import Odometry
 from topoloc.motion.poses import read_poses
 from topoloc.registry import check_names, make, registry
 from topoloc.trajectory.model import load_model

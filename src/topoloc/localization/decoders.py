@@ -81,7 +81,8 @@ def _share(scores: NDArray, edges: NDArray, best_edge: int) -> float:
 
 
 class Beam:
-    """Multi-hypothesis decoding one step at a time (see the module docstring): :meth:`start`, :meth:`step`, :meth:`trace`."""
+    """Multi-hypothesis decoding one step at a time (see the module docstring), with the methods of
+    :class:`topoloc.localizer.Filter`: :meth:`start`, :meth:`update`, :meth:`answer`, :meth:`path`."""
 
     def __init__(self, states: DirectedEdges, strategy: str = "strategy1", k: int = 5, initial: str = "all",
                  score: str = "joint", reseed: int = 0, reseed_penalty: float = 5.0, initial_k: int = 5) -> None:
@@ -94,9 +95,21 @@ class Beam:
         self.states, self.strategy, self.k, self.initial, self.score = states, strategy, k, initial, score
         self.reseed, self.reseed_penalty, self.initial_k = reseed, reseed_penalty, initial_k
         self.valid_states = np.flatnonzero(states.valid)
+        self.start()
+
+    def start(self) -> None:
+        """Forget every step: no hypotheses (the first :meth:`update` seeds them)."""
         self.hist_state: list[NDArray[np.int64]] = []
 
-    def start(self, logp: NDArray) -> tuple[int, float]:
+    def update(self, logp: NDArray) -> tuple[int, float]:
+        """Take the next step's ``logp``; the online answer (edge, confidence)."""
+        return self._expand(logp) if self.hist_state else self._seed(logp)
+
+    def answer(self) -> tuple[int, float]:
+        """The online answer after the last step (edge, confidence); (-1, 0) before the first."""
+        return self._online() if self.hist_state else (-1, 0.0)
+
+    def _seed(self, logp: NDArray) -> tuple[int, float]:
         """Hypotheses on every valid state (or on the top ``k`` edges) from the first step's ``logp``; online answer."""
         logp = np.asarray(logp, dtype=np.float64)
         edge_of, k = self.states.edge, self.k
@@ -119,7 +132,7 @@ class Beam:
         best = int(self.states.edge[self.beam[0]])
         return best, _share(self.scores, self.states.edge[self.beam], best)
 
-    def step(self, logp: NDArray) -> tuple[int, float]:
+    def _expand(self, logp: NDArray) -> tuple[int, float]:
         """Expand the hypotheses with the next step's ``logp``; the online answer (edge, confidence)."""
         logp = np.asarray(logp, dtype=np.float64)
         states, k, edge_of = self.states, self.k, self.states.edge
@@ -169,7 +182,7 @@ class Beam:
         """Hypotheses alive after the last step."""
         return len(self.beam)
 
-    def trace(self) -> NDArray[np.int64]:
+    def path(self) -> NDArray[np.int64]:
         """The best final hypothesis traced back; a fresh start (-2) continues from the best hypothesis before it."""
         steps = len(self.hist_state)
         path = np.empty(steps, np.int64)
@@ -198,14 +211,13 @@ def beam_decode(
     if len(logp) == 0:
         raise ValueError("no steps to decode")
     beam = Beam(states, strategy, k, initial, score, reseed, reseed_penalty, initial_k)
-    answers = [beam.start(logp[0])]
-    alive = [beam.alive]
-    for t in range(1, len(logp)):
-        answers.append(beam.step(logp[t]))
+    answers, alive = [], []
+    for t in range(len(logp)):
+        answers.append(beam.update(logp[t]))
         alive.append(beam.alive)
     online = np.array([a for a, _ in answers], np.int64)
     confidence = np.array([c for _, c in answers], float)
-    return Decoded(online, beam.trace(), confidence, beam.initial_edges, beam.restarts, np.asarray(alive, np.int64))
+    return Decoded(online, beam.path(), confidence, beam.initial_edges, beam.restarts, np.asarray(alive, np.int64))
 
 
 def decode_strategy1(logp: NDArray, states: DirectedEdges, k: int = 5, **options) -> Decoded:

@@ -1,7 +1,7 @@
 """Evaluation from many starts: every localizer, and the oracle, on a drive cut at start points.
 
 A drive is cut at a start every ``start_every_m`` metres driven; from each start a localizer sees
-only the drive from there on (:meth:`topoloc.localization.roadmap.Odometry.cut`). Its answers are
+only the drive from there on (:meth:`topoloc.motion.poses.Odometry.cut`). Its answers are
 scored against the truth of the frames they were given at:
 
 * an answer is *right* when it is the true road, or a road that meets the true one at a node the

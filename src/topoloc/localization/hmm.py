@@ -42,9 +42,9 @@ from numpy.typing import NDArray
 from topoloc.encoding import turning_angle_from_headings
 from topoloc.geometry import bin_centre, straight_token
 from topoloc.graph.road_graph import RoadGraph
-from topoloc.localization.cells import CellGrid, Chains
 from topoloc.localization.connectivity import DirectedEdges
 from topoloc.localization.decoders import Decoded
+from topoloc.localization.metric.cell_grid import CellGrid, Chains
 
 log = logging.getLogger(__name__)
 
@@ -68,8 +68,8 @@ class HmmParams:
 
 
 class CellHMM:
-    """The baseline on one road graph; build once, then :meth:`decode` a token sequence, or :meth:`start` and
-    :meth:`step` one token at a time and :meth:`trace` the Viterbi path."""
+    """The baseline on one road graph; build once, then :meth:`run` a token sequence, or :meth:`start`,
+    :meth:`update` one token at a time and :meth:`path` the Viterbi path (:class:`topoloc.localizer.Filter`)."""
 
     def __init__(self, graph: RoadGraph, states: DirectedEdges, bins: int, params: HmmParams) -> None:
         self.states, self.bins, self.params = states, bins, params
@@ -129,8 +129,9 @@ class CellHMM:
         self.back: list[NDArray[np.int32]] = []
         self.log_evidence = 0.0
         self.initial = np.zeros(0, np.int64)
+        self.online: tuple[int, float] = (-1, 0.0)
 
-    def step(self, token: int, initial_k: int = 5, evidence: NDArray[np.float64] | None = None) -> tuple[int, float]:
+    def update(self, token: int, initial_k: int = 5, evidence: NDArray[np.float64] | None = None) -> tuple[int, float]:
         """Forward filter and Viterbi step for one token; the online answer (edge, its marginal).
 
         ``evidence``: an extra log-likelihood per cell of this step (e.g. a learned model's, see
@@ -170,9 +171,14 @@ class CellHMM:
             pointer = np.where(take, -1 - top, pointer)
         self.delta = best - best.max()
         self.back.append(pointer.astype(np.int32))
-        return online, float(marginal[online])
+        self.online = (online, float(marginal[online]))
+        return self.online
 
-    def trace(self) -> tuple[NDArray[np.int64], int]:
+    def answer(self) -> tuple[int, float]:
+        """The online answer after the last token (edge, its marginal); (-1, 0) before the first."""
+        return self.online
+
+    def path(self) -> tuple[NDArray[np.int64], int]:
         """The Viterbi cells of the steps so far, and the number of fresh starts on it."""
         steps = len(self.back)
         path_cells = np.empty(steps, np.int64)
@@ -186,14 +192,14 @@ class CellHMM:
                 cell = -1 - cell
         return path_cells, restarts
 
-    def decode(self, tokens: NDArray[np.int64], initial_k: int = 5) -> Decoded:
-        """Forward filter (online) and Viterbi path (consistent) of one drive's tokens."""
+    def run(self, tokens: NDArray[np.int64], initial_k: int = 5) -> Decoded:
+        """The batch form: forward filter (online) and Viterbi path (consistent) of one drive's tokens."""
         tokens = np.asarray(tokens, np.int64)
         if len(tokens) == 0:
             raise ValueError("no tokens")
         self.start()
-        answers = [self.step(int(token), initial_k) for token in tokens]
-        path_cells, restarts = self.trace()
+        answers = [self.update(int(token), initial_k) for token in tokens]
+        path_cells, restarts = self.path()
         online = np.array([a for a, _ in answers], np.int64)
         confidence = np.array([c for _, c in answers], float)
         extra = {"log_evidence": self.log_evidence, "explained_turns": self.explained_turns(tokens, path_cells),

@@ -13,7 +13,7 @@ what the vehicle has driven since the start:
   at least ``(1 - length_tol)`` times the distance driven on it;
 * every node passed: the candidate turns by the same angle as the true walk
   within ``angle_tol_deg`` (map headings where the roads meet,
-  :func:`topoloc.localization.lanes.end_headings`).
+  :func:`topoloc.localization.metric.lane_chains.end_headings`).
 
 Lengths and angles of the true walk are the map's own (not the odometry's), so
 the count depends on the map and the route only. The distance after which
@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.connectivity import DirectedEdges
-from topoloc.localization.lanes import end_headings
+from topoloc.localization.metric.lane_chains import end_headings
 
 
 @dataclass(frozen=True)

@@ -80,6 +80,7 @@ class OnlineRNN:
 
     A window starts every ``stride`` tokens and runs for ``window`` tokens with its own recurrent state;
     each token's output is read from the oldest window that covers it. ``window=None``: one window.
+    The methods are those of :class:`topoloc.localizer.Filter`; the answer is the log-probabilities.
     """
 
     def __init__(self, model: Any, window: int | None = None, stride: int | None = None) -> None:
@@ -96,8 +97,9 @@ class OnlineRNN:
         """Forget every token."""
         self.t = 0
         self.windows: dict[int, Any] = {}  # window start -> recurrent state
+        self.last: NDArray[np.float32] | None = None
 
-    def step(self, token: int, inputs: NDArray[np.float32] | None = None) -> NDArray[np.float32]:
+    def update(self, token: int, inputs: NDArray[np.float32] | None = None) -> NDArray[np.float32]:
         """Log-probabilities ``(E,)`` of the edge classes after ``token`` (``inputs``: its continuous features,
         for a model trained with them)."""
         torch = self._torch
@@ -124,4 +126,9 @@ class OnlineRNN:
         finally:
             torch.set_num_threads(threads)
         self.t += 1
+        self.last = out
         return out
+
+    def answer(self) -> NDArray[np.float32] | None:
+        """The log-probabilities after the last token (None before the first)."""
+        return self.last

@@ -3,8 +3,8 @@
 * :class:`RoadMap`: a road graph with its directed-edge connectivity and, for the learned
   localizers, the trained trajectory RNN; localizers keep their map structures in its cache, so
   every start of a multi-start evaluation reuses them.
-* :class:`Odometry`: a drive as planar poses (positions and yaw, in any frame: localizers use
-  only the motion), cut at any frame.
+* a drive's odometry is a :class:`topoloc.motion.poses.Odometry` (positions and yaw, in any frame:
+  localizers use only the motion), cut at any frame.
 * :class:`Observations`: what a localizer observes of a drive (tokens, odometry steps), each with
   the frame at which it is complete, so that answers can be compared with the truth.
 """
@@ -22,8 +22,8 @@ from numpy.typing import NDArray
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.connectivity import DirectedEdges, directed_edges
 from topoloc.localizer import Localizer, Track
-from topoloc.motion.poses import planar_track, planar_yaw
-from topoloc.segmentation import encode_track, token_features
+from topoloc.motion.poses import Odometry
+from topoloc.segmentation import encode_odometry
 
 
 class RoadMap:
@@ -44,48 +44,6 @@ class RoadMap:
         if key not in self.cache:
             self.cache[key] = build()
         return self.cache[key]
-
-
-@dataclass(frozen=True)
-class Odometry:
-    """A drive's planar odometry: positions ``xy`` (n, 2) in metres and ``yaw`` (n,) in radians, any frame."""
-
-    xy: NDArray[np.float64]
-    yaw: NDArray[np.float64]
-
-    def __post_init__(self) -> None:
-        if len(self.xy) != len(self.yaw):
-            raise ValueError(f"{len(self.xy)} positions for {len(self.yaw)} headings")
-
-    def __len__(self) -> int:
-        return len(self.xy)
-
-    @classmethod
-    def from_poses(cls, poses: NDArray[np.float64]) -> Odometry:
-        """From KITTI camera poses ``(n, 4, 4)``: the ground-plane track and the optical axis' yaw."""
-        return cls(planar_track(poses), planar_yaw(poses))
-
-    @classmethod
-    def from_track(cls, xy: NDArray[np.float64]) -> Odometry:
-        """From positions alone: the yaw is the direction of motion (reversing cannot be told apart)."""
-        xy = np.asarray(xy, float)
-        step = np.diff(xy, axis=0, append=xy[-1:] + (xy[-1:] - xy[-2:-1] if len(xy) > 1 else 0.0))
-        moving = np.hypot(*step.T) > 1e-9
-        yaw = np.arctan2(step[:, 1], step[:, 0])
-        if moving.any():  # standing frames keep the last direction of motion
-            index = np.maximum.accumulate(np.where(moving, np.arange(len(xy)), -1))
-            first = int(np.argmax(moving))
-            yaw = yaw[np.where(index >= 0, index, first)]
-        return cls(xy, yaw)
-
-    def cut(self, start: int) -> Odometry:
-        """The drive from frame ``start`` on (nothing before it is known)."""
-        return Odometry(self.xy[start:], self.yaw[start:])
-
-    @cached_property
-    def driven_m(self) -> NDArray[np.float64]:
-        """Metres driven up to each frame (path length of the positions)."""
-        return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(self.xy, axis=0).T))])
 
 
 @dataclass(frozen=True)
@@ -130,9 +88,6 @@ def token_observations(odometry: Odometry, map: RoadMap, conf: dict[str, Any], b
     ``extra`` holds each token's kind and place and its continuous features
     (:func:`topoloc.segmentation.token_features`, ``features``: ``(T, 3)``).
     """
-    seg, enc = conf["segmentation"], conf["encoding"]
-    track = encode_track(odometry.xy, map.graph.virtual_node_spacing_m, bins, float(seg["tolerance_m"]),
-                         float(enc["heading_lookahead_m"]), float(seg["turn_label_offset_m"]), float(seg["corner_skip_m"]))
+    track, features = encode_odometry(odometry.xy, odometry.yaw, map.graph.virtual_node_spacing_m, bins, conf)
     return Observations([int(t) for t in track.encoded.tokens], np.asarray(track.frame, np.int64),
-                        {"kind": track.kind, "place_m": track.place_m,
-                        "features": token_features(track, odometry.yaw, map.graph.virtual_node_spacing_m)})
+                        {"kind": track.kind, "place_m": track.place_m, "features": features})

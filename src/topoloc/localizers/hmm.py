@@ -8,14 +8,9 @@ import numpy as np
 
 from topoloc.geometry import straight_token
 from topoloc.localization.hmm import CellHMM, HmmParams
-from topoloc.localization.roadmap import (
-    Observations,
-    Odometry,
-    RoadLocalizer,
-    RoadMap,
-    token_observations,
-)
+from topoloc.localization.roadmap import Observations, RoadLocalizer, RoadMap, token_observations
 from topoloc.localizer import Answer, register
+from topoloc.motion.poses import Odometry
 
 
 @register
@@ -42,7 +37,7 @@ class HmmBaseline(RoadLocalizer):
 
     def _step(self, token: int, evidence: np.ndarray | None = None) -> Answer:
         """One token through the filter (with per-cell log-likelihood ``evidence``, if any); the answer."""
-        edge, confidence = self.hmm.step(token, evidence=evidence)
+        edge, confidence = self.hmm.update(token, evidence=evidence)
         cells = np.flatnonzero(self.hmm.cell_edge == edge)
         cell = int(cells[np.argmax(self.hmm.alpha[cells])])
         self._answer = Answer(edge, confidence, tuple(self.hmm.grid.xy[cell]))
@@ -54,18 +49,18 @@ class HmmBaseline(RoadLocalizer):
     def path(self) -> np.ndarray | None:
         if not self.hmm.back:
             return None
-        cells, _ = self.hmm.trace()
+        cells, _ = self.hmm.path()
         return self.hmm.cell_edge[cells]
 
     def explained(self, items: list[Any]) -> tuple[float, int]:
         """Share of the turn tokens that the map's turn along the Viterbi path matches, and their number."""
-        cells, _ = self.hmm.trace()
+        cells, _ = self.hmm.path()
         tokens_array = np.asarray([i[0] if isinstance(i, tuple) else i for i in items], np.int64)  # (token, features)
         return self.hmm.explained_turns(tokens_array, cells), int(np.sum(tokens_array[1:] != straight_token(self.bins)))
 
     def summary(self) -> dict[str, Any]:
         if not self.hmm.back:
             return {}
-        _, restarts = self.hmm.trace()
+        _, restarts = self.hmm.path()
         return {"initial_hypotheses": [int(e) for e in self.hmm.initial], "restarts": int(restarts),
                 "log_evidence": float(self.hmm.log_evidence), "cells": int(self.hmm.num_cells)}

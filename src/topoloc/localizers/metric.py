@@ -1,5 +1,6 @@
-"""The metric filter: a Bayes filter over 2 m positions on the roads, on the odometry itself
-(:mod:`topoloc.localization.metric`; on city maps with a coarse phase, :mod:`topoloc.localization.city_filter`)."""
+"""The registered localizer ``metric``: the adapter of the metric filter (the package
+:mod:`topoloc.localization.metric`; on city maps with a coarse phase,
+:class:`~topoloc.localization.metric.city_filter.CityFilter`) to :class:`topoloc.localizer.Localizer`."""
 
 from __future__ import annotations
 
@@ -7,10 +8,12 @@ from typing import Any
 
 import numpy as np
 
-from topoloc.localization.city_filter import CityFilter, coarse_settings, uses_coarse
-from topoloc.localization.metric import MetricModel, MetricSettings, odometry_steps
-from topoloc.localization.roadmap import Observations, Odometry, RoadLocalizer, RoadMap
+from topoloc.localization.metric.city_filter import CityFilter, coarse_settings, uses_coarse
+from topoloc.localization.metric.map_model import MetricModel, MetricSettings
+from topoloc.localization.metric.odometry_steps import odometry_steps
+from topoloc.localization.roadmap import Observations, RoadLocalizer, RoadMap
 from topoloc.localizer import Answer, Track, register
+from topoloc.motion.poses import Odometry
 
 
 @register
@@ -34,7 +37,7 @@ class MetricLocalizer(RoadLocalizer):
         return Observations(list(zip(steps.direction.tolist(), steps.yaw.tolist())), steps.frame)
 
     def start(self) -> None:
-        self.filter.reset()
+        self.filter.start()
 
     def update(self, observation: tuple[int, float]) -> Answer:
         direction, yaw = observation
@@ -60,19 +63,19 @@ class MetricLocalizer(RoadLocalizer):
         for j in range(len(steps)):
             fresh = np.flatnonzero(first == j)
             if len(fresh):
-                bank.reset(fresh)
+                bank.start(fresh)
             bank.update(int(steps.direction[j]), float(steps.yaw[j]))
             for b, est in enumerate(bank.answers()):
                 if first[b] <= j:
                     answers[b].append(Answer(est.edge, est.confidence, tuple(est.xy) if est.edge >= 0 else None))
         out = []
         for b, start in enumerate(starts):
-            cells = bank.trace(b)
+            cells = bank.path(b)
             path = np.where(cells >= 0, bank.grid.edge[np.maximum(cells, 0)], -1)
             items = list(zip(steps.direction[first[b]:].tolist(), steps.yaw[first[b]:].tolist()))
             out.append((int(start), Observations(items, steps.frame[first[b]:]), Track.of_answers(answers[b], path)))
         return out
 
     def path(self) -> np.ndarray | None:
-        cells = self.filter.trace(0)
+        cells = self.filter.path(0)
         return np.where(cells >= 0, self.filter.grid.edge[np.maximum(cells, 0)], -1) if len(cells) else None

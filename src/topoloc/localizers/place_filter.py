@@ -25,8 +25,8 @@ class PlaceFilter(PlaceLocalizer):
         super().start()
         self.bayes.start()
 
-    def step(self, frame: Frame) -> Step:
-        return self.bayes.step(frame.ds, frame.row())
+    def estimate(self, frame: Frame) -> Step:
+        return self.bayes.update(frame.ds, frame.row())
 
     def confidence(self, step: Step) -> float:
         return step.score

@@ -27,8 +27,8 @@ class PlaceLoop(PlaceLocalizer):
         super().start()
         self.search.start()
 
-    def step(self, frame: Frame) -> Step:
-        return self.search.step(frame)
+    def estimate(self, frame: Frame) -> Step:
+        return self.search.update(frame)
 
     def confidence(self, step: Step) -> float:
         return 0.0 if np.isnan(step.score) else float(np.clip(step.score, 0.0, 1.0))

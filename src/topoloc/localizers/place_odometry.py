@@ -23,5 +23,5 @@ class PlaceOdometry(PlaceLocalizer):
         super().start()
         self.integration.start()
 
-    def step(self, frame: Frame) -> Step:
-        return self.integration.step(frame)
+    def estimate(self, frame: Frame) -> Step:
+        return self.integration.update(frame)

@@ -14,14 +14,9 @@ import numpy as np
 from topoloc.errors import InputError
 from topoloc.localization.decoders import Beam
 from topoloc.localization.rnn import OnlineRNN, check_model
-from topoloc.localization.roadmap import (
-    Observations,
-    Odometry,
-    RoadLocalizer,
-    RoadMap,
-    token_observations,
-)
+from topoloc.localization.roadmap import Observations, RoadLocalizer, RoadMap, token_observations
 from topoloc.localizer import Answer, register
+from topoloc.motion.poses import Odometry
 
 
 class _RnnLocalizer(RoadLocalizer):
@@ -52,7 +47,7 @@ class _RnnLocalizer(RoadLocalizer):
         token, inputs = observation if isinstance(observation, tuple) else (observation, None)
         if not 0 <= int(token) < self.bins:
             raise InputError("tokens", f"tokens must lie in [0, {self.bins}) for this model, got {token}")
-        return self.rnn.step(int(token), inputs)
+        return self.rnn.update(int(token), inputs)
 
 
 @register
@@ -80,17 +75,18 @@ class _BeamLocalizer(_RnnLocalizer):
 
     def start(self) -> None:
         super().start()
+        self.beam.start()
         self.steps = 0
 
     def update(self, observation: int) -> Answer:
         logp = self._logp(observation)
-        edge, share = self.beam.start(logp) if self.steps == 0 else self.beam.step(logp)
+        edge, share = self.beam.update(logp)
         self.steps += 1
         self._answer = Answer(edge, share)
         return self._answer
 
     def path(self) -> np.ndarray | None:
-        return self.beam.trace() if self.steps else None
+        return self.beam.path() if self.steps else None
 
     def summary(self) -> dict[str, Any]:
         if not self.steps:

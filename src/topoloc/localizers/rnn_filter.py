@@ -21,9 +21,10 @@ import numpy as np
 from topoloc.errors import InputError
 from topoloc.localization.hmm import CellHMM, HmmParams
 from topoloc.localization.rnn import OnlineRNN, check_model
-from topoloc.localization.roadmap import Observations, Odometry, RoadMap, token_observations
+from topoloc.localization.roadmap import Observations, RoadMap, token_observations
 from topoloc.localizer import Answer, register
 from topoloc.localizers.hmm import HmmBaseline
+from topoloc.motion.poses import Odometry
 
 
 @register
@@ -56,6 +57,6 @@ class RnnFilter(HmmBaseline):
         token, inputs = observation if isinstance(observation, tuple) else (observation, None)
         if not 0 <= int(token) < self.bins:
             raise InputError("tokens", f"tokens must lie in [0, {self.bins}) for this model, got {token}")
-        logp = self.rnn.step(int(token), inputs if self.feature_dim else None)
+        logp = self.rnn.update(int(token), inputs if self.feature_dim else None)
         evidence = self.weight * np.maximum(logp.astype(float), self.log_floor)[self.hmm.cell_edge]
         return self._step(int(token), evidence)

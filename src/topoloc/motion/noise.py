@@ -12,9 +12,11 @@ and integrated from the true first pose: the step from frame ``k`` to ``k + 1`` 
 heading of frame ``k + 1``, as the truth does. The random draws are, in this order, the distance noise
 of every step, then the heading noise of every step.
 
-Users: :mod:`topoloc.odometry.simulate` (``odometry.simulated.noise``), :mod:`topoloc.place.odometry`
-(``place.odometry_noise``: the scale error drawn per drive) and :mod:`topoloc.localization.simulation`
-(parameters drawn per drive from a noise level).
+Every noise setting of the config has the keys of :data:`NOISE_KEYS`. Users:
+:func:`topoloc.odometry.simulate.simulate_drive` (``odometry.simulated.noise``),
+:func:`topoloc.odometry.simulate.simulate_pattern_drive` and :mod:`topoloc.trajectory.drives` (parameters
+drawn per drive from ranges, ``dataset.simulated.noise``), :mod:`topoloc.place.odometry`
+(``place.odometry_noise``: the scale error drawn per drive from ``N(0, scale_error^2)``).
 """
 
 from __future__ import annotations
@@ -23,7 +25,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
+
+from topoloc.motion.poses import Odometry
 
 NOISE_KEYS = ("scale_error", "distance_noise", "heading_drift_deg_per_100m", "heading_noise_deg")
 
@@ -43,19 +47,12 @@ class OdometryNoise:
         return cls(*(float(noise[key]) for key in NOISE_KEYS))
 
 
-@dataclass(frozen=True)
-class NoisyTrack:
-    """The odometry: per-frame noisy distance ``ds`` (``ds[0] = 0``), positions ``xy`` relative to the first
-    frame (``xy[0] = 0``, axes of the truth) and headings ``yaw`` (starting at the true first heading)."""
-
-    ds: NDArray[np.float64]
-    xy: NDArray[np.float64]
-    yaw: NDArray[np.float64]
-
-
 def integrate_odometry(xy: ArrayLike, yaw: ArrayLike, noise: OdometryNoise, rng: np.random.Generator,
-                       sign: ArrayLike | None = None) -> NoisyTrack:
+                       sign: ArrayLike | None = None) -> Odometry:
     """Corrupt the true increments of ``xy`` (n, 2) / ``yaw`` (n,) and integrate them (module docstring).
+
+    The odometry's positions are relative to the first frame (``xy[0] = 0``, axes of the truth), its headings
+    start at the true first heading, and ``ds`` holds the noisy distance of every step (``ds[0] = 0``).
 
     ``sign`` (n - 1,): +1 for a step driven forwards, -1 backwards (default: all forwards).
     """
@@ -69,4 +66,4 @@ def integrate_odometry(xy: ArrayLike, yaw: ArrayLike, noise: OdometryNoise, rng:
                 + np.radians(noise.heading_noise_deg) * rng.standard_normal(len(ds)) * (np.abs(ds) > 0))
     est_yaw = yaw[0] + np.concatenate([[0.0], np.cumsum(dpsi_est)])
     moves = ds_est[:, None] * np.column_stack([np.cos(est_yaw[1:]), np.sin(est_yaw[1:])])
-    return NoisyTrack(np.concatenate([[0.0], ds_est]), np.concatenate([np.zeros((1, 2)), np.cumsum(moves, axis=0)]), est_yaw)
+    return Odometry(np.concatenate([np.zeros((1, 2)), np.cumsum(moves, axis=0)]), est_yaw, np.concatenate([[0.0], ds_est]))

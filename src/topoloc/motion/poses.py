@@ -1,4 +1,4 @@
-"""KITTI-format files: poses, timestamps, calibration, per-frame GPS; planar views of poses.
+"""KITTI-format files: poses, timestamps, calibration, per-frame GPS; planar views of poses; :class:`Odometry`.
 
 KITTI poses are one 3x4 matrix ``[R | t]`` per line (12 numbers, row-major),
 camera-to-world of camera 0: x right, y down, z forward. Seen from above, the
@@ -9,6 +9,8 @@ Every reader raises :class:`~topoloc.errors.InputError` naming file and line.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -150,3 +152,51 @@ def poses_from_planar(track: NDArray[np.float64], yaw: NDArray[np.float64]) -> N
     poses[:, 0, 0], poses[:, 0, 2], poses[:, 2, 0], poses[:, 2, 2] = c, s, -s, c
     poses[:, 0, 3], poses[:, 2, 3] = track[:, 0], track[:, 1]
     return poses
+
+
+@dataclass(frozen=True)
+class Odometry:
+    """A drive's planar odometry: positions ``xy`` (n, 2) in metres and ``yaw`` (n,) in radians, any frame.
+
+    ``ds`` (n,): the measured signed distance of each frame's step (``ds[0] = 0``) where the odometry was
+    integrated from such steps (:func:`topoloc.motion.noise.integrate_odometry`), else None.
+    """
+
+    xy: NDArray[np.float64]
+    yaw: NDArray[np.float64]
+    ds: NDArray[np.float64] | None = None
+
+    def __post_init__(self) -> None:
+        if len(self.xy) != len(self.yaw):
+            raise ValueError(f"{len(self.xy)} positions for {len(self.yaw)} headings")
+
+    def __len__(self) -> int:
+        return len(self.xy)
+
+    @classmethod
+    def from_poses(cls, poses: NDArray[np.float64]) -> Odometry:
+        """From KITTI camera poses ``(n, 4, 4)``: the ground-plane track and the optical axis' yaw."""
+        return cls(planar_track(poses), planar_yaw(poses))
+
+    @classmethod
+    def from_track(cls, xy: NDArray[np.float64]) -> Odometry:
+        """From positions alone: the yaw is the direction of motion (reversing cannot be told apart)."""
+        xy = np.asarray(xy, float)
+        step = np.diff(xy, axis=0, append=xy[-1:] + (xy[-1:] - xy[-2:-1] if len(xy) > 1 else 0.0))
+        moving = np.hypot(*step.T) > 1e-9
+        yaw = np.arctan2(step[:, 1], step[:, 0])
+        if moving.any():  # standing frames keep the last direction of motion
+            index = np.maximum.accumulate(np.where(moving, np.arange(len(xy)), -1))
+            first = int(np.argmax(moving))
+            yaw = yaw[np.where(index >= 0, index, first)]
+        return cls(xy, yaw)
+
+    def cut(self, start: int) -> Odometry:
+        """The drive from frame ``start`` on (nothing before it is known)."""
+        ds = None if self.ds is None else np.concatenate([[0.0], self.ds[start + 1:]])
+        return Odometry(self.xy[start:], self.yaw[start:], ds)
+
+    @cached_property
+    def driven_m(self) -> NDArray[np.float64]:
+        """Metres driven up to each frame (path length of the positions)."""
+        return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(self.xy, axis=0).T))])

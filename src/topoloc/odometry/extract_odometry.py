@@ -112,12 +112,13 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         # Local KITTI frame: frame 0 at the origin, optical axis (+z, yaw 90 deg in (x, z)) along the start heading.
         geo = Georeference(float(drv.gt_yaw[0] - np.pi / 2.0), drv.gt_xy[0].copy())
         to_local = lambda xy: (xy - geo.t) @ geo.rotation  # noqa: E731 (inverse of geo.apply)
-        est = poses_from_planar(to_local(drv.est_xy), drv.est_yaw - geo.theta)
+        est_map = drv.gt_xy[0] + drv.odometry.xy  # the odometry starts at the true start pose
+        est = poses_from_planar(to_local(est_map), drv.odometry.yaw - geo.theta)
         gt = poses_from_planar(to_local(drv.gt_xy), drv.gt_yaw - geo.theta)
         times = np.arange(len(est)) * float(sim["frame_spacing_m"]) / float(sim["speed_mps"])
-        est_map, gt_map = drv.est_xy, drv.gt_xy
+        gt_map = drv.gt_xy
         flagged = np.zeros(len(est), dtype=bool)
-        true_edges = drv.edge_id
+        true_edges = drv.edge
         georef = {"method": "simulation start pose", **geo.to_dict(np.pi / 2.0)}
         label_source = "ground truth"
     else:

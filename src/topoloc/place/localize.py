@@ -160,7 +160,8 @@ def checked_vertex_s(vertex_s: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 class WindowSearch:
-    """The loop of the module docstring, one repeat frame at a time (:meth:`start`, then :meth:`step` per frame)."""
+    """The loop of the module docstring, one repeat frame at a time (:meth:`start`, then :meth:`update` per frame;
+    the methods of :class:`topoloc.localizer.Filter`)."""
 
     def __init__(self, vertex_s: NDArray[np.float64], settings: LocalizeSettings) -> None:
         self.vertex_s, self.settings = checked_vertex_s(vertex_s), settings
@@ -173,6 +174,7 @@ class WindowSearch:
         # the frames the sequence scores and the relocalization look back on, with the repeat's odometry arc length
         self.recent: deque[tuple[Frame, float]] = deque(maxlen=max(self.settings.sequence_frames, self.settings.reloc_images))
         self.global_best: dict[int, int] = {}  # best vertex of a recent frame against all vertices, by frame number
+        self.last: Step | None = None
 
     def _recent(self, k: int) -> tuple[Frame, float]:
         return self.recent[len(self.recent) - 1 - (self.t - k)]
@@ -191,7 +193,7 @@ class WindowSearch:
             total = total + np.asarray(frame.score(nearest_vertices(vertex_s, vertex_s[window] - (self.driven - driven))), float)
         return total / (1 + len(earlier))
 
-    def step(self, frame: Frame) -> Step:
+    def update(self, frame: Frame) -> Step:
         """Take the next repeat frame; return its estimate."""
         settings, vertex_s = self.settings, self.vertex_s
         self.t += 1
@@ -220,17 +222,23 @@ class WindowSearch:
                     v, self.s, self.since_match, event = int(window[j]), float(vertex_s[window[j]]), 0, MATCH
                 else:
                     event = NO_MATCH
-        return Step(v, self.s, event, score)
+        self.last = Step(v, self.s, event, score)
+        return self.last
+
+    def answer(self) -> Step | None:
+        """The estimate after the last frame (None before the first)."""
+        return self.last
 
 
 def localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], score: ScoreFn, settings: LocalizeSettings) -> Trace:
     """Run the loop of the module docstring over ``len(ds)`` repeat frames (``ds[0]`` is ignored)."""
     search = WindowSearch(vertex_s, settings)
-    return Trace.of_steps([search.step(frame) for frame in drive_frames(ds, score)])
+    return Trace.of_steps([search.update(frame) for frame in drive_frames(ds, score)])
 
 
 class PathIntegration:
-    """Odometry alone from vertex 0, one frame at a time: the reference without retrieval."""
+    """Odometry alone from vertex 0, one frame at a time: the reference without retrieval (the methods of
+    :class:`topoloc.localizer.Filter`)."""
 
     def __init__(self, vertex_s: NDArray[np.float64]) -> None:
         self.vertex_s = checked_vertex_s(vertex_s)
@@ -239,20 +247,26 @@ class PathIntegration:
     def start(self) -> None:
         """Back at vertex 0 before the first frame."""
         self.t, self.driven = -1, 0.0
+        self.last: Step | None = None
 
-    def step(self, frame: Frame) -> Step:
+    def update(self, frame: Frame) -> Step:
         """Take the next repeat frame (only its odometry); return its estimate."""
         self.t += 1
         if self.t > 0:
             self.driven += float(frame.ds)
         s = float(self.vertex_s[0] + self.driven)
-        return Step(nearest_vertex(self.vertex_s, s), s, ODOMETRY, float("nan"))
+        self.last = Step(nearest_vertex(self.vertex_s, s), s, ODOMETRY, float("nan"))
+        return self.last
+
+    def answer(self) -> Step | None:
+        """The estimate after the last frame (None before the first)."""
+        return self.last
 
 
 def dead_reckoning(vertex_s: NDArray[np.float64], ds: NDArray[np.float64]) -> Trace:
     """Path integration alone from vertex 0 over ``len(ds)`` frames (``ds[0]`` is ignored)."""
     integration = PathIntegration(vertex_s)
-    return Trace.of_steps([integration.step(frame) for frame in drive_frames(ds, _no_scores)])
+    return Trace.of_steps([integration.update(frame) for frame in drive_frames(ds, _no_scores)])
 
 
 def _no_scores(t: int, idx: NDArray[np.int64]) -> NDArray[np.float64]:
@@ -352,15 +366,15 @@ class PlaceLocalizer(Localizer):
         self._answer, self.last = Answer(-1, 0.0), None
 
     @abstractmethod
-    def step(self, frame: Frame) -> Step:
-        """The estimate after ``frame``."""
+    def estimate(self, frame: Frame) -> Step:
+        """The estimate after ``frame`` (of the localizer's :class:`~topoloc.localizer.Filter`)."""
 
     def confidence(self, step: Step) -> float:
         """The confidence of ``step``'s vertex."""
         return 0.0
 
     def update(self, observation: Frame) -> Answer:
-        self.last = self.step(observation)
+        self.last = self.estimate(observation)
         self._answer = Answer(self.last.vertex, self.confidence(self.last), tuple(self.xy[self.last.vertex]))
         return self._answer
 

@@ -138,7 +138,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     tables, embed_s, embedded = [], 0.0, 0
     for k, condition in enumerate(names["repeat"]):
         images = repeat.condition(condition)
-        odometry = noisy_odometry(repeat.xy, repeat.yaw, conf["odometry_noise"], np.random.default_rng([int(conf["seed"]), 29, k]))
+        odometry, _ = noisy_odometry(repeat.xy, repeat.yaw, conf["odometry_noise"], np.random.default_rng([int(conf["seed"]), 29, k]))
         started = time.perf_counter()
         queries = model.embed(images)
         embed_s += time.perf_counter() - started

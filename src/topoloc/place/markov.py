@@ -70,7 +70,8 @@ def predict(belief: NDArray[np.float64], vertex_s: NDArray[np.float64], ds: floa
 
 
 class BayesFilter:
-    """The filter of the module docstring, one repeat frame at a time (:meth:`start`, then :meth:`step` per frame)."""
+    """The filter of the module docstring, one repeat frame at a time (:meth:`start`, then :meth:`update` per frame;
+    the methods of :class:`topoloc.localizer.Filter`)."""
 
     def __init__(self, vertex_s: NDArray[np.float64], settings: FilterSettings) -> None:
         self.vertex_s, self.settings = checked_vertex_s(vertex_s), settings
@@ -83,8 +84,9 @@ class BayesFilter:
         self.t = -1
         self.belief = np.zeros(len(self.vertex_s))
         self.belief[0] = 1.0
+        self.last: Step | None = None
 
-    def step(self, ds: float, scores: NDArray[np.float64]) -> Step:
+    def update(self, ds: float, scores: NDArray[np.float64]) -> Step:
         """Take the next frame: ``ds`` metres driven since the last (ignored on the first), ``scores`` against every
         vertex; return the vertex of highest belief with its belief as the score."""
         scores = np.asarray(scores, float)
@@ -96,7 +98,12 @@ class BayesFilter:
         self.belief = self.belief * (self.settings.floor + np.clip(scores, 0.0, 1.0))
         self.belief /= self.belief.sum()
         v = int(np.argmax(self.belief))
-        return Step(v, float(self.vertex_s[v]), FILTER, float(self.belief[v]))
+        self.last = Step(v, float(self.vertex_s[v]), FILTER, float(self.belief[v]))
+        return self.last
+
+    def answer(self) -> Step | None:
+        """The estimate after the last frame (None before the first)."""
+        return self.last
 
 
 def markov_localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], scores: NDArray[np.float64],
@@ -109,4 +116,4 @@ def markov_localize(vertex_s: NDArray[np.float64], ds: NDArray[np.float64], scor
     scores = np.asarray(scores, float)
     if scores.shape != (len(ds), len(bayes.vertex_s)):
         raise InputError("scores", f"expected {(len(ds), len(bayes.vertex_s))} (frames, vertices), got {scores.shape}")
-    return Trace.of_steps([bayes.step(frame.ds, frame.row()) for frame in drive_frames(ds, MatrixScorer(scores))])
+    return Trace.of_steps([bayes.update(frame.ds, frame.row()) for frame in drive_frames(ds, MatrixScorer(scores))])

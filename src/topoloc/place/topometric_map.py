@@ -170,7 +170,7 @@ def build_map(teach: PlaceSet, graph: RoadGraph, model: Any, conf: dict[str, Any
     embed_s = time.perf_counter() - started
     descriptor = correlation_descriptors(images, tuple(conf["localize"]["correlation_size"]))
     rng = np.random.default_rng([int(conf["seed"]), 23])
-    odometry = noisy_odometry(teach.xy, teach.yaw, conf["odometry_noise"], rng)
+    odometry, scale_error = noisy_odometry(teach.xy, teach.yaw, conf["odometry_noise"], rng)
     cmd = conf["command"]
     crossings = route_intersections(graph, teach.edge, teach.xy, float(cmd["lookahead_m"]), float(cmd["straight_deg"]),
                                     float(cmd["distance_m"]))
@@ -179,7 +179,7 @@ def build_map(teach: PlaceSet, graph: RoadGraph, model: Any, conf: dict[str, Any
     drift = np.hypot(*(odometry.xy - teach.xy).T)
     facts = {"vertices": float(len(topo)), "length_m": float(topo.s[-1]),
              "true_length_m": float(np.hypot(*np.diff(teach.xy, axis=0).T).sum()),
-             "scale_error": odometry.scale_error, "drift_end_m": float(drift[-1]), "drift_max_m": float(drift.max()),
+             "scale_error": scale_error, "drift_end_m": float(drift[-1]), "drift_max_m": float(drift.max()),
              "intersections": float(len(crossings)), "embed_s": embed_s, "embed_images_per_s": len(images) / max(embed_s, 1e-9),
              **{f"vertices_{name}": float(np.sum(command == i)) for i, name in enumerate(COMMANDS)}}
     return topo, crossings, facts

@@ -1,7 +1,7 @@
 """Training drives like test drives: simulated odometry on the map, segmented and encoded as a real drive is.
 
 The dataset source ``simulated_drives`` (config ``dataset.simulated``): each training row is one drive
-made as :func:`topoloc.localization.simulation.simulate` makes its ``random`` drives (a random walk on the
+made as :func:`topoloc.odometry.simulate.simulate_pattern_drive` makes its ``random`` drives (a random walk on the
 map, one-way roads respected, no U-turn but at a dead end where the walk is cut; driven the way a car
 does with :func:`topoloc.motion.route.smooth_path`: in the right-hand lane, corners rounded, a frame about
 every metre) of a length drawn from ``length_m``, whose odometry goes through the one noise model
@@ -9,7 +9,7 @@ every metre) of a length drawn from ``length_m``, whose odometry goes through th
 ``noise``. The walk is drawn by :class:`Walker` on arrays (the graph's pandas tables make
 :func:`topoloc.motion.route.random_route` ten times slower, which matters for thousands of drives). The first ``U(0, crop_m)`` metres are cut off, so a row starts anywhere on a
 road, not only at an intersection (the model learns to localize from any start). The odometry is then
-segmented and encoded by :func:`topoloc.localization.roadmap.token_observations`, the very function that
+segmented and encoded by :func:`topoloc.segmentation.encode_odometry`, the very function that
 makes the tokens of a test drive for the localizers (Douglas-Peucker of ``segmentation``, then
 :mod:`topoloc.encoding`), which also gives each token's continuous features
 (:func:`topoloc.segmentation.token_features`). The label of a token is the true road at its frame.
@@ -26,10 +26,10 @@ from numpy.typing import NDArray
 
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
-from topoloc.localization.roadmap import Odometry, RoadMap, token_observations
-from topoloc.localization.simulation import NoiseLevel
 from topoloc.motion.noise import NOISE_KEYS, OdometryNoise, integrate_odometry
 from topoloc.motion.route import DENSE_M, sample_route, smooth_path
+from topoloc.odometry.simulate import NoiseLevel
+from topoloc.segmentation import encode_odometry
 
 
 class Walker:
@@ -104,7 +104,7 @@ def noise_level(ranges: Mapping[str, Any]) -> NoiseLevel:
     return NoiseLevel("training", **pairs)
 
 
-def training_drive(graph: RoadGraph, walker: Walker, road: RoadMap, conf: dict[str, Any], level: NoiseLevel,
+def training_drive(graph: RoadGraph, walker: Walker, conf: dict[str, Any], level: NoiseLevel,
                    rng: np.random.Generator) -> TrainingDrive | None:
     """One simulated, cropped, encoded drive (module docstring); None when it yields fewer than two tokens."""
     sim = conf["dataset"]["simulated"]
@@ -115,7 +115,7 @@ def training_drive(graph: RoadGraph, walker: Walker, road: RoadMap, conf: dict[s
     if not route:
         return None
     dense, dense_edge = sample_route(graph, route, froms, DENSE_M)
-    xy, yaw, edge = smooth_path(dense, dense_edge, 1.0, 4.0, 1.5, 3.0)  # as localization.simulation.simulate
+    xy, yaw, edge = smooth_path(dense, dense_edge, 1.0, 4.0, 1.5, 3.0)  # as odometry.simulate.simulate_pattern_drive
     cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
     keep = cum <= length
     xy, yaw, edge, cum = xy[keep], yaw[keep], edge[keep], cum[keep]
@@ -123,20 +123,20 @@ def training_drive(graph: RoadGraph, walker: Walker, road: RoadMap, conf: dict[s
     if len(xy) - first < 3:
         return None
     odo = integrate_odometry(xy[first:], yaw[first:], OdometryNoise.from_dict(level.draw(rng)), rng)
-    obs = token_observations(Odometry(odo.xy, odo.yaw), road, conf, int(conf["encoding"]["angle_bins"]))
-    if len(obs) < 2:
+    track, features = encode_odometry(odo.xy, odo.yaw, graph.virtual_node_spacing_m, int(conf["encoding"]["angle_bins"]), conf)
+    if len(track.encoded.tokens) < 2:
         return None
-    labels = edge[first:][obs.frame]
+    labels = edge[first:][np.asarray(track.frame, np.int64)]
     nodes = [*froms, graph.other_end(route[-1], froms[-1])]
-    return TrainingDrive([int(n) for n in nodes], [int(e) for e in route], np.asarray(obs.items, np.int64),
-                         labels.astype(np.int64), obs.extra["features"], float(cum[-1] - cum[first]))
+    return TrainingDrive([int(n) for n in nodes], [int(e) for e in route], np.asarray([int(t) for t in track.encoded.tokens], np.int64),
+                         labels.astype(np.int64), features, float(cum[-1] - cum[first]))
 
 
 def training_drives(graph: RoadGraph, conf: dict[str, Any], seed: int) -> Iterator[TrainingDrive]:
     """``dataset.simulated.drives`` training drives of ``graph`` from ``seed`` (same seed, same drives)."""
     sim = conf["dataset"]["simulated"]
     level = noise_level(sim["noise"])
-    road, walker = RoadMap(graph), Walker(graph)
+    walker = Walker(graph)
     rng = np.random.default_rng([seed, 3])
     made = tries = 0
     while made < int(sim["drives"]):
@@ -144,7 +144,7 @@ def training_drives(graph: RoadGraph, conf: dict[str, Any], seed: int) -> Iterat
         if tries > 2 * int(sim["drives"]) + 100:
             raise InputError("dataset.simulated.length_m", f"only {made} of {tries} simulated drives gave two tokens or more "
                                                           "on this map: roads too short for the drive lengths?")
-        drive = training_drive(graph, walker, road, conf, level, rng)
+        drive = training_drive(graph, walker, conf, level, rng)
         if drive is not None:
             made += 1
             yield drive

@@ -20,7 +20,8 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from topoloc.localization.metric import MetricModel, concentration, resultant_length
+from topoloc.localization.metric.map_model import MetricModel
+from topoloc.localization.metric.von_mises import concentration, resultant_length
 
 TWO_PI = 2.0 * math.pi
 TINY = float(np.finfo(np.float32).tiny)
@@ -54,8 +55,9 @@ class Estimate:
 class MetricFilter:
     """The metric filter's beliefs for ``filters`` starts of one drive (see the module docstring).
 
-    :meth:`reset` (re)starts filters, :meth:`update` takes one step for every running filter,
-    :meth:`answers` gives each filter's answer and :meth:`trace` its path traced back.
+    :meth:`start` (re)starts filters, :meth:`update` takes one step for every running filter,
+    :meth:`answer` gives a filter's answer (:meth:`answers` every filter's) and :meth:`path` its path traced back
+    (the methods of :class:`topoloc.localizer.Filter`, for many filters at once).
     """
 
     def __init__(self, model: MetricModel, filters: int = 1, keep_top: int = 512) -> None:
@@ -129,7 +131,7 @@ class MetricFilter:
 
     # -- life cycle ------------------------------------------------------------------------------------------
 
-    def reset(self, which: int | NDArray[np.int64] | None = None) -> None:
+    def start(self, which: int | NDArray[np.int64] | None = None) -> None:
         """(Re)start filters ``which`` (default: all): uniform over the map (by road length), offset unknown."""
         which = np.arange(self.filters) if which is None else np.atleast_1d(np.asarray(which, np.int64))
         keep = ~np.isin(self.group // self.classes, which)
@@ -293,7 +295,7 @@ class MetricFilter:
         self._remember(direction, yaw)
 
     def _remember(self, direction: int, yaw: float) -> None:
-        """Each running filter's active cells of this step, most probable first (for :meth:`trace`); when there
+        """Each running filter's active cells of this step, most probable first (for :meth:`path`); when there
         are more than ``keep_top``, none (the trace then follows the motion and the heading)."""
         n = self.num_cells
         filt = self.group // self.classes
@@ -345,7 +347,7 @@ class MetricFilter:
         belief = np.bincount(self.group[mine] % self.classes, weights=self.weight[mine], minlength=self.classes)
         return belief / belief.sum() if belief.sum() > 0 else belief
 
-    def trace(self, which: int = 0) -> NDArray[np.int64]:
+    def path(self, which: int = 0) -> NDArray[np.int64]:
         """A consistent cell sequence of filter ``which``, traced back from its last step's most probable cell.
 
         At each earlier step the cell is one of those the transition leads from to the cell chosen after it:

@@ -10,7 +10,7 @@ end of ``b``'s start zone. A vehicle in a middle chooses its next turn when
 it enters the end zone (equal shares), then drives the turn chain, then the
 middle of ``b`` (or, when ``b`` is shorter than two zones, its next turn).
 On a turn chain the map heading sweeps smoothly from ``a``'s to ``b``'s
-(:class:`topoloc.localization.cells.CellGrid`), as a vehicle's heading does.
+(:class:`topoloc.localization.metric.cell_grid.CellGrid`), as a vehicle's heading does.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from topoloc.graph.road_graph import RoadGraph
-from topoloc.localization.cells import Chains, polyline_headings, state_coords
 from topoloc.localization.connectivity import DirectedEdges
+from topoloc.localization.metric.cell_grid import Chains, polyline_headings, state_coords
 
 
 def end_headings(graph: RoadGraph, states: DirectedEdges, half: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

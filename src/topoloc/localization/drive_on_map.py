@@ -1,5 +1,5 @@
-"""Checks of a drive against the map (used by the ``topoloc localize`` CLI) and the GeoJSON of a localizer's
-answers (the CLI and the ``decode_trajectories`` stage)."""
+"""A drive on the map: checks that a drive belongs to the map (used by the ``topoloc localize`` CLI) and the
+GeoJSON of a localizer's answers on the map (the CLI and the ``decode_trajectories`` stage)."""
 
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 A chain is a stretch of road that a vehicle drives from its start to its end:
 a directed edge (a road in a direction its one-way tag allows, see
 :mod:`topoloc.localization.connectivity`), or, for the metric filter, a piece
-of one (:mod:`topoloc.localization.lanes`: the middle of a road, or a *turn*
+of one (:mod:`topoloc.localization.metric.lane_chains`: the middle of a road, or a *turn*
 from the end of one road into the start of the next). A chain lies on at most
 two directed edges: it starts ``first_from`` metres into ``first_state`` and,
 ``split`` metres further, may pass the node into ``second_state``.

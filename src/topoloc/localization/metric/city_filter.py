@@ -2,7 +2,7 @@
 
 On a city map (Heidelberg: 1.3 million cells of 2 m) a belief spread over the whole map costs about 0.2 s
 per 2 m step: slower than a car drives. A filter therefore starts on a *coarse* model of the same map
-(:class:`~topoloc.localization.metric.MetricModel` with cells ``coarse_factor`` times longer, on the same
+(:class:`~topoloc.localization.metric.map_model.MetricModel` with cells ``coarse_factor`` times longer, on the same
 chains, so that every fine cell lies in one coarse cell): a coarse step is taken every ``coarse_factor``
 fine steps (net, so reversing counts back), with the yaw at that moment; ``coarse_factor`` 4 costs about
 16 times less per metre. The coarse model may be more tolerant (heading spread and turn spread times
@@ -11,13 +11,14 @@ observation per coarse cell it already tells roads apart less sharply per metre 
 default spread is 1 and the coarse phase is kept short. Once the coarse belief of a filter holds at most
 ``coarse_handoff_cells`` positions (counted in fine cells), it is handed to the fine filter at a coarse
 step: each coarse entry's mass is spread over the fine cells it covers (by their length), with its heading
-offset belief; from there the filter is the dense one (:class:`~topoloc.localization.metric_filter.MetricFilter`).
+offset belief; from there the filter is the dense one (:class:`~topoloc.localization.metric.dense_filter.MetricFilter`).
 A fine filter that gets lost (more likely off the map than on it) goes back to the coarse phase with its
 belief summed into coarse cells, and the coarse filter spreads the returning mass over the map.
 
 Maps of at most ``coarse_min_cells`` cells (every map before city scale) never use the coarse phase: the
 answers are the dense filter's, bit for bit. :class:`CityFilter` has the interface of
-:class:`MetricFilter` that the localizer uses (``reset``, ``update``, ``answers``, ``answer``, ``trace``).
+:class:`MetricFilter` that the localizer uses (the :class:`topoloc.localizer.Filter` methods ``start``,
+``update``, ``answer`` and ``path``, and ``answers``).
 """
 
 from __future__ import annotations
@@ -27,8 +28,9 @@ import dataclasses
 import numpy as np
 from numpy.typing import NDArray
 
-from topoloc.localization.metric import MetricModel, MetricSettings, concentration, resultant_length
-from topoloc.localization.metric_filter import COMPLEX, REAL, TINY, Estimate, MetricFilter
+from topoloc.localization.metric.dense_filter import COMPLEX, REAL, TINY, Estimate, MetricFilter
+from topoloc.localization.metric.map_model import MetricModel, MetricSettings
+from topoloc.localization.metric.von_mises import concentration, resultant_length
 
 
 def coarse_settings(settings: MetricSettings) -> MetricSettings:
@@ -77,16 +79,16 @@ class CityFilter:
 
     # -- life cycle ------------------------------------------------------------------------------------------
 
-    def reset(self, which: int | NDArray[np.int64] | None = None) -> None:
+    def start(self, which: int | NDArray[np.int64] | None = None) -> None:
         """(Re)start filters ``which`` (default: all), uniform over the map; on a city map in the coarse phase."""
         which = np.arange(self.filters) if which is None else np.atleast_1d(np.asarray(which, np.int64))
         if self.coarse is None:
-            self.fine.reset(which)
+            self.fine.start(which)
             return
         self.fine.stop(which)
         for b in which:
             self.fine.history[int(b)] = []
-        self.coarse.reset(which)
+        self.coarse.start(which)
         self.in_coarse[which] = True
         self._coarse_answers = None
 
@@ -169,11 +171,11 @@ class CityFilter:
         """The answer of filter ``which``."""
         return self.answers()[which]
 
-    def trace(self, which: int = 0) -> NDArray[np.int64]:
+    def path(self, which: int = 0) -> NDArray[np.int64]:
         """Filter ``which``'s path traced back (fine cells; -1 throughout while it is still in the coarse phase)."""
         if self.in_coarse[which]:
             return np.full(len(self.fine.history[which]), -1, np.int64)
-        return self.fine.trace(which)
+        return self.fine.path(which)
 
     def belief(self, which: int = 0) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
         """Filter ``which``'s belief: map positions (n, 2) of its cells, their probabilities, the off-map probability."""

@@ -1,0 +1,103 @@
+"""The metric filter's settings and its model of a map, built once per map and settings.
+
+:class:`MetricModel` holds the cells (:mod:`topoloc.localization.metric.cell_grid`, on the chains of
+:mod:`topoloc.localization.metric.lane_chains`), the *motion model* (the transitions of a forward and a
+backward step, blurred by ``step_jitter``; the scale classes) and the *measurement model* (the concentration
+of one heading observation per cell, the map heading, the off-map heading density). The package docstring
+(:mod:`topoloc.localization.metric`) describes the filter.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.localization.connectivity import DirectedEdges
+from topoloc.localization.metric.cell_grid import CellGrid
+from topoloc.localization.metric.lane_chains import lane_chains
+
+TWO_PI = 2.0 * math.pi
+INT_SETTINGS = ("scale_classes", "coarse_factor", "coarse_min_cells", "coarse_handoff_cells")
+
+
+@dataclass(frozen=True)
+class MetricSettings:
+    """Settings of the metric filter (config ``localization.metric``)."""
+
+    cell_m: float
+    turn_zone_m: float
+    heading_window_m: float
+    heading_sigma_deg: float
+    turn_sigma_share: float
+    offset_drift_deg: float
+    step_jitter: float
+    floor: float
+    offmap_turn_prob: float
+    offmap_prior: float
+    leave_prob: float
+    enter_prob: float
+    prune: float
+    scale_error_max: float
+    scale_classes: int
+    coarse_factor: int = 1
+    coarse_min_cells: int = 0
+    coarse_handoff_cells: int = 100000
+    coarse_spread: float = 1.0
+
+    @classmethod
+    def from_conf(cls, conf: dict) -> MetricSettings:
+        """The settings of the validated config slice ``localization.metric``."""
+        return cls(**{k: (int if k in INT_SETTINGS else float)(conf[k]) for k in cls.__dataclass_fields__})
+
+
+def _transitions(grid: CellGrid, distance_m: float) -> sp.csr_matrix:
+    """Moves of ``distance_m`` as a CSR matrix with one row per source cell."""
+    moves = grid.moves(distance_m)
+    n = grid.num_cells
+    return sp.csr_matrix((moves.weight, (moves.src, moves.dst)), shape=(n, n))
+
+
+class MetricModel:
+    """What the filter needs of a map, built once: the cells (with turn chains) and the step transitions."""
+
+    def __init__(self, graph: RoadGraph, states: DirectedEdges, settings: MetricSettings) -> None:
+        self.settings = settings
+        chains = lane_chains(graph, states, settings.turn_zone_m, settings.heading_window_m)
+        self.grid = grid = CellGrid(graph, states, chains, settings.cell_m, settings.heading_window_m)
+        n = grid.num_cells
+        p = settings.step_jitter
+        one = _transitions(grid, settings.cell_m)
+        two = _transitions(grid, 2.0 * settings.cell_m)
+        self.forward = (p * sp.identity(n, format="csr") + (1.0 - 2.0 * p) * one + p * two).tocsr().astype(np.float32)
+        back = one.T.tocsr()  # rows: the cell a backward step starts from; columns: where it came from
+        norm = np.asarray(back.sum(axis=1)).ravel()
+        self.backward = (sp.diags(1.0 / np.maximum(norm, 1e-12)) @ back).tocsr().astype(np.float32)
+        self.forward_cols, self.backward_cols = self.forward.T.tocsr(), self.backward.T.tocsr()
+        sigma = np.radians(settings.heading_sigma_deg)
+        turning = settings.turn_sigma_share * grid.turn_ramp  # how a vehicle turns varies: the more, the sharper the turn
+        self.kappa_obs = (1.0 / (sigma**2 + turning**2)).astype(np.float32)  # von Mises concentration of one observation
+        self.unheading = np.exp(-1j * np.radians(grid.heading)).astype(np.complex64)  # e^{-i h}: a yaw into an offset
+        self.drift = float(np.radians(settings.offset_drift_deg) ** 2 * settings.cell_m / 100.0)  # variance per step
+        # off the map the heading is its last value plus the noise of two observations, or anything (a turn)
+        self.offmap_kappa = 1.0 / (2.0 * sigma**2)
+        self.floor_density = settings.floor / TWO_PI
+        k = max(1, int(settings.scale_classes))
+        self.scales = np.linspace(-settings.scale_error_max, settings.scale_error_max, k) if k > 1 else np.zeros(1)
+        spread = settings.scale_error_max / 2.0 if settings.scale_error_max > 0 else 1.0
+        prior = np.exp(-0.5 * (self.scales / spread) ** 2)
+        self.scale_prior = prior / prior.sum()
+
+    def offmap_density(self, turn: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Density of a heading change ``turn`` (radians, per step) off the map; NaN (no last heading): uniform."""
+        p = self.settings.offmap_turn_prob
+        straight = np.exp(self.offmap_kappa * (np.cos(turn) - 1.0)) * math.sqrt(self.offmap_kappa / TWO_PI + 1.0 / TWO_PI**2)
+        return np.where(np.isfinite(turn), (1.0 - p) * straight + p / TWO_PI, 1.0 / TWO_PI)
+
+    @property
+    def num_cells(self) -> int:
+        return self.grid.num_cells
