@@ -9,7 +9,8 @@ import pytest
 
 from tests.conftest import make_config, write_osm
 from tests.render.conftest import lonlat, town  # noqa: F401 (the town fixture, re-exported)
-from topoloc.drive.lanes import DriveRoute, build_route, plan_route
+from topoloc.drive.drive_route import DriveRoute, build_route
+from topoloc.drive.route_planning import plan_route
 from topoloc.graph.build_graph import build_road_graph
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.render.scene import Scene, scene_for_path

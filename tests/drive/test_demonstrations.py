@@ -22,7 +22,8 @@ from topoloc.drive.demonstrations import (
     training_route,
 )
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
-from topoloc.drive.lanes import build_route, plan_route
+from topoloc.drive.drive_route import build_route
+from topoloc.drive.route_planning import plan_route
 from topoloc.drive.routes import make_simulator, random_drive_route
 from topoloc.drive.simulator import SUCCESS, Simulator, VehicleSpec
 from topoloc.drive.train_controller import DemoData

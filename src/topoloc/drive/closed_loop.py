@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from topoloc.drive.demonstrations import as_input
 from topoloc.drive.expert import Expert
-from topoloc.drive.lanes import DriveRoute
+from topoloc.drive.drive_route import DriveRoute
 from topoloc.drive.local_path import map_path, path_plane
 from topoloc.drive.simulator import RUNNING, Control, Simulator
 from topoloc.errors import InputError

@@ -2,7 +2,7 @@
 
 * The **teach route** is the path of render route ``place.route`` (:func:`topoloc.render.drives.drive_path`,
   the route of the ``render_places`` teach drive and so of the topometric map), as a chain of road edges
-  whose lane (:mod:`topoloc.drive.lanes`) ends where that path ends.
+  whose lane (:mod:`topoloc.drive.drive_route`) ends where that path ends.
 * **Training routes** are random walks (:func:`topoloc.motion.route.random_route`, one-way roads respected,
   cut where they turn back at a dead end) seeded by ``drive.seed``, the route index and the attempt; a walk whose lane
   runs on other roads' carriageways for more than ``drive.lane.max_shared_m`` is drawn again (the images could not
@@ -22,7 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from topoloc.drive.lanes import DriveRoute, build_route, route_froms
+from topoloc.drive.drive_route import DriveRoute, build_route
+from topoloc.drive.route_planning import route_froms
 from topoloc.drive.simulator import Simulator, VehicleSpec
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
