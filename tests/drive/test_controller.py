@@ -9,14 +9,14 @@ import torch
 
 from tests.drive.conftest import drive_conf, node_at, route_scene
 from topoloc.drive.controller import WAYPOINT_ARCS, load_controller, pure_pursuit, waypoint_targets
+from topoloc.drive.controller_training import build_model, fit, signature_example
 from topoloc.drive.demonstrations import Demonstrations, record
-from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
 from topoloc.drive.drive_route import build_route
-from topoloc.drive.route_planning import plan_route
+from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
 from topoloc.drive.local_path import map_path, path_plane, raster
+from topoloc.drive.route_planning import plan_route
 from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, VehicleSpec
 from topoloc.drive.topo_lp import TopoLP
-from topoloc.drive.train_controller import build_model, fit, signature_example
 from topoloc.errors import InputError
 from topoloc.render.rig import StereoRig
 from topoloc.training import LoggedModel, log_model

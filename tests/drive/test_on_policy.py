@@ -17,10 +17,10 @@ from topoloc.config import deep_merge
 from topoloc.drive import simulate_demonstrations, train_controller
 from topoloc.drive.config_slices import controller_slice
 from topoloc.drive.controller import load_controller
-from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.drive_route import build_route
-from topoloc.drive.route_planning import plan_route
+from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.on_policy import DaggerSettings, closed_loop_check, drive_on_policy, offset_ahead
+from topoloc.drive.route_planning import plan_route
 from topoloc.drive.routes import make_simulator, random_drive_route
 from topoloc.drive.simulator import SUCCESS, Simulator, VehicleSpec
 from topoloc.errors import InputError

@@ -9,8 +9,8 @@ from tests.conftest import make_config, write_osm
 from tests.drive.conftest import TOWN_ROUTES, drive_conf, node_at, route_scene, town_route
 from tests.render.conftest import lonlat
 from topoloc.drive.demonstrations import training_route
-from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.drive_route import build_route
+from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.lane_geometry import DENSE_M, lane_curvature, lane_polyline, widen_bends
 from topoloc.drive.route_planning import check_route, plan_route
 from topoloc.drive.routes import random_drive_route, route_of_edges

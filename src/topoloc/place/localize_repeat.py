@@ -53,6 +53,7 @@ from topoloc.place.plot import bars_figure, errors_figure
 from topoloc.place.topometric_map import TopometricMap
 from topoloc.registry import check_names, make
 from topoloc.render.conditions import check_conditions
+from topoloc.report_tables import condition_table
 
 log = logging.getLogger(__name__)
 
@@ -91,17 +92,6 @@ def summarize(frames: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def paper_table(summary: pd.DataFrame, column: str, held_out: list[str], fmt: str = "{:.3f}") -> str:
-    """A markdown table like the paper's Tables 1 and 2: one row per method, the mean, one column per condition."""
-    conditions = list(dict.fromkeys(summary.condition))
-    header = ["method", "Mean", *[f"{c} (held out)" if c in held_out else c for c in conditions]]
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    for method in dict.fromkeys(summary.method):
-        rows = summary[summary.method == method].set_index("condition").loc[conditions, column]
-        lines.append("| " + " | ".join([method, fmt.format(rows.mean()), *[fmt.format(v) for v in rows]]) + " |")
-    return "\n".join(lines)
-
-
 def tables_markdown(summary: pd.DataFrame, names: dict[str, list[str]], facts: dict[str, float]) -> str:
     """All tables of the stage, with a caption each."""
     held = names["held_out"]
@@ -113,7 +103,7 @@ def tables_markdown(summary: pd.DataFrame, names: dict[str, list[str]], facts: d
                                ("Accepted window matches", "matches", "{:.0f}"),
                                ("Accepted matches more than 5 m off", "false_matches", "{:.0f}"),
                                ("Median localization error (m)", "median_error_m", "{:.2f}")):
-        parts += [f"## {title}", "", paper_table(summary, column, held, fmt), ""]
+        parts += [f"## {title}", "", condition_table(summary, "method", column, held, fmt, "method"), ""]
     parts.append(f"Network embedding: {facts['embed_images_per_s']:.0f} images/s on this machine.")
     return "\n".join(parts) + "\n"
 
