@@ -31,18 +31,19 @@ import torch
 from tqdm import tqdm
 
 from topoloc.drive.agents import DLMAgent, LPAgent, ReplayAgent, method_name
+from topoloc.drive.camera import image_shape, place_window
 from topoloc.drive.controller import load_controller
 from topoloc.drive.episodes import run_episode, speed_limit_ahead, teach_controls
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.follow_report import write_follow_report
 from topoloc.drive.localization_adapters import GroundTruth, PlaceLocalization
 from topoloc.drive.repeat_routes import intersections, repeat_routes
-from topoloc.drive.routes import image_shape, make_simulator, place_window, teach_route
+from topoloc.drive.routes import make_simulator, teach_route
 from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localizer import PLACE_OBSERVATIONS
-from topoloc.place.localize import PlaceLocalizer
 from topoloc.place.network import load_model
+from topoloc.place.topometric_localization import PlaceLocalizer
 from topoloc.place.topometric_map import TopometricMap
 from topoloc.registry import check_names, make
 from topoloc.render.conditions import check_conditions

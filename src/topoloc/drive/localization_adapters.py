@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from topoloc.drive.simulator import Simulator
 from topoloc.errors import InputError
 from topoloc.localizer import Localizer
-from topoloc.place.localize import Frame, Scorer
+from topoloc.place.topometric_localization import Frame, Scorer
 from topoloc.place.topometric_map import TopometricMap
 
 
@@ -75,7 +75,7 @@ class GroundTruth:
 
 class PlaceLocalization:
     """A place localizer of the registry on the map, fed the ``window`` (rows, columns) of the step's image that is the
-    place images' camera (:func:`topoloc.drive.routes.place_window`) and the odometry distance."""
+    place images' camera (:func:`topoloc.drive.camera.place_window`) and the odometry distance."""
 
     def __init__(self, localizer: Localizer, topo: TopometricMap, model: Any, conf: dict[str, Any],
                  window: tuple[slice, slice]) -> None:

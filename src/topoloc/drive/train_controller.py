@@ -16,12 +16,12 @@ from __future__ import annotations
 import logging
 from typing import Any
 
+from topoloc.drive.camera import image_shape
 from topoloc.drive.controller import AGENT_NAMES
 from topoloc.drive.controller_training import check_controller, dagger_rounds, fit
 from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.on_policy import DaggerSettings
 from topoloc.drive.plot import training_figure
-from topoloc.drive.routes import image_shape
 from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json
 

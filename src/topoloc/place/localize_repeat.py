@@ -2,7 +2,7 @@
 
 Per repeat condition the drive's odometry is drawn from the noise model (an independent scale error per
 drive, :mod:`topoloc.place.odometry`) and the place localizers of ``localize.localizers`` (registry names,
-:mod:`topoloc.localizers`: ``place_loop``, the paper's loop of :mod:`topoloc.place.localize`;
+:mod:`topoloc.localizers`: ``place_loop``, the paper's loop of :mod:`topoloc.place.topometric_localization`;
 ``place_filter``, beyond the paper, the Bayes filter of :mod:`topoloc.place.markov`, settings
 ``localize.filter``; ``place_odometry``, path integration alone, the reference) run on the frames scored by
 
@@ -35,7 +35,10 @@ from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json, write_text
 from topoloc.localizer import PLACE_OBSERVATIONS, run_batch
 from topoloc.place.images import PlaceSet
-from topoloc.place.localize import (
+from topoloc.place.network import load_model
+from topoloc.place.odometry import noisy_odometry
+from topoloc.place.plot import bars_figure, errors_figure
+from topoloc.place.topometric_localization import (
     MATCH,
     RELOC_FAIL,
     RELOC_OK,
@@ -47,9 +50,6 @@ from topoloc.place.localize import (
     correlation_descriptors,
     drive_frames,
 )
-from topoloc.place.network import load_model
-from topoloc.place.odometry import noisy_odometry
-from topoloc.place.plot import bars_figure, errors_figure
 from topoloc.place.topometric_map import TopometricMap
 from topoloc.registry import check_names, make
 from topoloc.render.conditions import check_conditions
