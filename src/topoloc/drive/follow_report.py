@@ -30,7 +30,8 @@ def route_table(episodes: pd.DataFrame) -> str:
 def write_follow_report(episodes: pd.DataFrame, traces: dict[str, np.ndarray], strips: list, parts: list[RepeatRoute],
                         graph: RoadGraph, conf: dict[str, Any], held_out: list[str], outputs: dict[str, str],
                         strip_title: str) -> dict[str, float]:
-    """The episode table, summary, tables, figures and metrics of the drives (the outputs of :mod:`topoloc.drive.follow_route`): the metrics."""
+    """Write the outputs of :mod:`topoloc.drive.follow_route` from its drives (episode table, summary, tables, figures
+    and metrics); return the metrics."""
     follow, place = conf["drive"]["follow"], conf["place"]
     trained = [str(c) for c in conf["drive"]["demonstrations"]["conditions"]]
     summary = (episodes.groupby(["agent", "condition"], sort=False)
