@@ -25,10 +25,13 @@ import pandas as pd
 import torch
 
 from topoloc.config import load
-from topoloc.drive.closed_loop import DLMAgent, GroundTruth, PlaceLocalization, vertex_lane_s
+from topoloc.drive.agents import DLMAgent
+from topoloc.drive.camera import image_shape, place_window
 from topoloc.drive.controller import load_controller
 from topoloc.drive.demonstrations import as_input
-from topoloc.drive.routes import evaluation_route, image_shape, make_simulator, place_window
+from topoloc.drive.localization_adapters import GroundTruth, PlaceLocalization
+from topoloc.drive.repeat_routes import vertex_lane_s
+from topoloc.drive.routes import evaluation_route, make_simulator
 from topoloc.drive.simulator import RUNNING, Control
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.place.network import load_model

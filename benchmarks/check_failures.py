@@ -9,7 +9,7 @@ Drives the check's routes (:func:`topoloc.drive.on_policy.closed_loop_check`: th
 offsets; the controller alone, told the route's command or local path) and prints one row per failed route: where
 it ended, the commands of its last 40 steps, its speed at the last step against the expert's lowest target speed
 over the last second, its mean steering against the expert's over the last second, and the metres of the route's
-lane shared with another road's carriageway (:func:`topoloc.drive.lanes.shared_samples`). Then the totals: success
+lane shared with another road's carriageway (:func:`topoloc.drive.lane_rasters.shared_samples`). Then the totals: success
 rate, failures by outcome, failures within 20 m of the start, failures under a turn command, and the median ratio
 of the controller's steering to the expert's where the expert steers hard (|steer| > 0.3) in a failure's last
 second: below 1, it under-steers; below 0, it steers the other way.

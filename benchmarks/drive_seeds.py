@@ -32,7 +32,7 @@ import numpy as np
 import torch
 
 from topoloc.config import deep_merge, load_layered
-from topoloc.drive import follow_route, train_controller
+from topoloc.drive import controller_training, follow_route, train_controller
 from topoloc.drive.controller import load_controller
 from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.io import write_json
@@ -70,7 +70,7 @@ def train_seed(conf: dict[str, Any], agent: str, seed: int, out: Path, demonstra
 
 
 def check_seed(conf: dict[str, Any], agent: str, controller: Path, out: Path) -> dict[str, float]:
-    """The closed-loop check (``train_controller.check``) of ``controller`` on unseen routes of ``conf``'s region, written
+    """The closed-loop check (``controller_training.check_controller``) of ``controller`` on unseen routes of ``conf``'s region, written
     to the JSON file ``out``, unless already there."""
     if out.exists():
         return json.loads(out.read_text())
@@ -79,7 +79,7 @@ def check_seed(conf: dict[str, Any], agent: str, controller: Path, out: Path) ->
               "osm": osm_input(conf)}
     torch.set_num_threads(int(conf["drive"]["threads"]))
     model = load_controller(controller, cls=CONTROLLERS[agent])
-    metrics = train_controller.check(deep_merge(conf, {"controller": agent}), inputs, model)
+    metrics = controller_training.check_controller(deep_merge(conf, {"controller": agent}), inputs, model)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json(out, metrics)
     return metrics

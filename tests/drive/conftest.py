@@ -6,12 +6,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from tests.conftest import make_config, write_osm
 from tests.render.conftest import lonlat, town  # noqa: F401 (the town fixture, re-exported)
-from topoloc.drive.lanes import DriveRoute, build_route, plan_route
+from topoloc.drive.controller import WAYPOINT_SCALE_M, TopoDLM, waypoint_targets
+from topoloc.drive.controller_training import DemoData, fit
+from topoloc.drive.demonstrations import Demonstrations, record
+from topoloc.drive.drive_route import DriveRoute, build_route
+from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
+from topoloc.drive.route_planning import plan_route
+from topoloc.drive.simulator import SUCCESS, Simulator, VehicleSpec
 from topoloc.graph.build_graph import build_road_graph
 from topoloc.graph.road_graph import RoadGraph
+from topoloc.render.rig import StereoRig
 from topoloc.render.scene import Scene, scene_for_path
 
 #: Node pairs of the town's evaluation routes (grid corners and edge midpoints, by position): straight on,
@@ -66,3 +74,95 @@ def straight_road(tmp_path_factory) -> dict:
     osm = write_osm(tmp / "straight.osm", nodes, ways)
     graph, _ = build_road_graph(str(osm), ["residential"], 20.0)
     return {"osm": osm, "graph": graph}
+
+
+@pytest.fixture(scope="session")
+def straight(straight_road):
+    """The drive settings of the straight-road controllers (small network and budget) and the simulator of 260 m of
+    the road."""
+    graph = straight_road["graph"]
+    drive = drive_conf(train={"batch_size": 32, "batches_per_epoch": 15, "max_epochs": 6, "max_time_min": None,
+                              "accelerator": "cpu", "log_model": False, "log_every_n_steps": 5},
+                       network={"channels": [16, 24, 32], "hidden": 64, "dropout": 0.1},
+                       demonstrations={"val_routes": 1})
+    edges, froms = plan_route(graph, node_at(graph, 0.0, 60.0), node_at(graph, 400.0, 60.0))
+    route = build_route(graph, edges, froms, drive["lane"]["smoothing_m"], drive["lane"]["margin_m"],
+                       min_radius_m=drive["lane"]["min_radius_m"]).cut(260.0)
+    sim = Simulator(route, route_scene(straight_road["osm"], graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
+                    VehicleSpec.from_conf(drive), 100.0)
+    return drive, sim
+
+
+@pytest.fixture(scope="session")
+def straight_demos(straight):
+    """The expert's noisy drives of the straight road under clear_noon: two routes to train on, one to validate."""
+    drive, sim = straight
+    expert = Expert(sim.route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
+    noise = NoiseSettings.from_conf({**drive["noise"], "share": 0.3})
+    parts = []
+    for r in range(3):  # two routes' worth of frames to train on, the third to validate
+        demo, status = record(sim, expert, "clear_noon", 10 + r, noise, 2, True, ["clear_noon"], r)
+        assert status == SUCCESS
+        parts.append(demo)
+    return Demonstrations.concat(parts)
+
+
+@pytest.fixture(scope="session")
+def trained_dlm(straight, straight_demos, tmp_path_factory) -> tuple:
+    """Topo-DLM fitted on the straight road's demonstrations: the model, its metrics and its checkpoint."""
+    drive, _ = straight
+    path = tmp_path_factory.mktemp("dlm") / "controller.ckpt"
+    model, _history, metrics = fit(drive, straight_demos, str(path))
+    return model, metrics, path
+
+
+#: The validation steps the steering error is measured on: the expert's corrections, steering at least this much (on a
+#: straight road a zero answer is right on every other step).
+CORRECTION_STEER = 0.1
+
+
+def _val_data(drive: dict, demos: Demonstrations, agent: str) -> DemoData:
+    noise = {k: float(v) for k, v in drive["path_noise"].items()} if agent == "lp" else None
+    return DemoData(demos, int(drive["demonstrations"]["val_routes"]), drive["train"],
+                    float(drive["vehicle"]["max_speed_mps"]), noise)
+
+
+def zero_answer_errors(drive: dict, demos: Demonstrations) -> dict[str, float]:
+    """The errors of :func:`val_errors` for a controller that answers zero (no steering, every lane point at the
+    vehicle)."""
+    val = _val_data(drive, demos, "dlm").val_idx
+    corrections = val[np.abs(demos.steer[val]) >= CORRECTION_STEER]
+    return {"steer": float(np.abs(demos.steer[corrections]).mean()),
+            "lane_points_m": float(np.abs(waypoint_targets(demos.path[val])).mean() * WAYPOINT_SCALE_M)}
+
+
+@torch.no_grad()
+def val_errors(model: TopoDLM, drive: dict, demos: Demonstrations, agent: str = "dlm") -> dict[str, float]:
+    """Mean absolute errors of ``model`` on the validation steps: ``steer`` on the expert's corrections
+    (:data:`CORRECTION_STEER`) and, for a ``waypoints`` output, ``lane_points_m``: the coordinates of its lane points."""
+    data = _val_data(drive, demos, agent)
+    model.eval()
+    steer, points, label = [], [], []
+    for images, speed, condition, target in data.val_dataloader():
+        chosen, _ = model._outputs(model._shrink(images.permute(0, 3, 1, 2).float()), speed, condition)
+        steer.append((model._control(chosen, speed)[0] - target[:, 0]).abs())
+        label.append(target[:, 0])
+        if model.n_outputs > 2:
+            points.append((chosen[:, :-1] - target[:, 2:]).abs().mean(dim=1) * WAYPOINT_SCALE_M)
+    out = {"steer": float(torch.cat(steer)[torch.cat(label).abs() >= CORRECTION_STEER].mean())}
+    return out | ({"lane_points_m": float(torch.cat(points).mean())} if points else {})
+
+
+class ConstantSteer:
+    """A baseline controller: always the same steering (0: straight on, 1: full left), with the throttle that holds
+    the expert's cruise speed."""
+
+    def __init__(self, steer: float, drive: dict) -> None:
+        self.steer, self.cruise, self.gain = steer, float(drive["expert"]["cruise_mps"]), float(drive["expert"]["speed_gain"])
+
+    def act(self, image, speed: float, command) -> tuple[float, float]:
+        return self.steer, float(np.clip(self.gain * (self.cruise - speed), -1.0, 1.0))
+
+
+#: The trivial controllers every closed-loop bound on a trained controller must fail: steering fixed at these values.
+BASELINES = {"always straight": 0.0, "always left": 1.0}

@@ -8,18 +8,11 @@ import pytest
 
 from tests.conftest import make_config
 from tests.drive.conftest import drive_conf, route_scene, town_route
-from topoloc.drive.closed_loop import (
-    GroundTruth,
-    ReplayAgent,
-    repeat_routes,
-    route_starts,
-    run_episode,
-    speed_limit_ahead,
-    teach_controls,
-    vertex_lane_s,
-)
+from topoloc.drive.agents import ReplayAgent
+from topoloc.drive.episodes import run_episode, speed_limit_ahead, teach_controls
 from topoloc.drive.expert import Expert, ExpertSettings
-from topoloc.drive.follow_route import intersections
+from topoloc.drive.localization_adapters import GroundTruth
+from topoloc.drive.repeat_routes import intersections, repeat_routes, route_starts, vertex_lane_s
 from topoloc.drive.simulator import Control, Simulator, VehicleSpec
 from topoloc.errors import InputError
 from topoloc.place.topometric_map import TopometricMap

@@ -1,5 +1,6 @@
-"""Topo-DLM: a controller learned from a few hundred demonstration frames of a straight road stays in its lane,
-and a checkpoint for another image size is refused."""
+"""Topo-DLM and Topo-LP: a controller learned from a few hundred demonstration frames of a straight road stays in its
+lane where a controller that always steers straight or always left does not, steers closer to the expert than random
+weights or a zero answer, and a checkpoint for another image size is refused."""
 
 from __future__ import annotations
 
@@ -7,46 +8,15 @@ import numpy as np
 import pytest
 import torch
 
-from tests.drive.conftest import drive_conf, node_at, route_scene
+from tests.drive.conftest import BASELINES, ConstantSteer, val_errors, zero_answer_errors
 from topoloc.drive.controller import WAYPOINT_ARCS, load_controller, pure_pursuit, waypoint_targets
-from topoloc.drive.demonstrations import Demonstrations, record
-from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
-from topoloc.drive.lanes import build_route, plan_route
+from topoloc.drive.controller_training import build_model, fit, signature_example
+from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.local_path import map_path, path_plane, raster
-from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, VehicleSpec
+from topoloc.drive.simulator import RUNNING, SUCCESS, Control
 from topoloc.drive.topo_lp import TopoLP
-from topoloc.drive.train_controller import build_model, fit, signature_example
 from topoloc.errors import InputError
-from topoloc.render.rig import StereoRig
 from topoloc.training import LoggedModel, log_model
-
-
-@pytest.fixture(scope="module")
-def straight(straight_road):
-    graph = straight_road["graph"]
-    drive = drive_conf(train={"batch_size": 32, "batches_per_epoch": 15, "max_epochs": 6, "max_time_min": None,
-                              "accelerator": "cpu", "log_model": False, "log_every_n_steps": 5},
-                       network={"channels": [16, 24, 32], "hidden": 64, "dropout": 0.1},
-                       demonstrations={"val_routes": 1})
-    edges, froms = plan_route(graph, node_at(graph, 0.0, 60.0), node_at(graph, 400.0, 60.0))
-    route = build_route(graph, edges, froms, drive["lane"]["smoothing_m"], drive["lane"]["margin_m"],
-                       min_radius_m=drive["lane"]["min_radius_m"]).cut(260.0)
-    sim = Simulator(route, route_scene(straight_road["osm"], graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
-                    VehicleSpec.from_conf(drive), 100.0)
-    return drive, sim
-
-
-@pytest.fixture(scope="module")
-def straight_demos(straight):
-    drive, sim = straight
-    expert = Expert(sim.route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
-    noise = NoiseSettings.from_conf({**drive["noise"], "share": 0.3})
-    parts = []
-    for r in range(3):  # two routes' worth of frames to train on, the third to validate
-        demo, status = record(sim, expert, "clear_noon", 10 + r, noise, 2, True, ["clear_noon"], r)
-        assert status == SUCCESS
-        parts.append(demo)
-    return Demonstrations.concat(parts)
 
 
 def _closed_loop(sim, act) -> tuple[str, np.ndarray]:
@@ -59,20 +29,56 @@ def _closed_loop(sim, act) -> tuple[str, np.ndarray]:
     return status, np.asarray(lateral)
 
 
-def test_a_controller_from_a_few_hundred_frames_stays_in_lane(straight, straight_demos, tmp_path):
-    drive, sim = straight
+def keeps_its_lane(status: str, lateral: np.ndarray) -> bool:
+    """The closed-loop bound: the route driven to its end, back in the lane's middle after 3 s and kept there."""
+    return status == SUCCESS and np.max(np.abs(lateral[30:])) < 0.8 and np.mean(np.abs(lateral[30:])) < 0.4
+
+
+#: A trained controller's errors on the validation steps (:func:`tests.drive.conftest.val_errors`) are under these
+#: shares of a zero answer's: the steering on the expert's corrections, the coordinates of the lane points.
+ERROR_SHARE = {"steer": 0.7, "lane_points_m": 0.15}
+
+
+def learnt(errors: dict[str, float], zero: dict[str, float], key: str) -> bool:
+    """Whether the error ``key`` is under its share (:data:`ERROR_SHARE`) of a zero answer's."""
+    return errors[key] < ERROR_SHARE[key] * zero[key]
+
+
+def test_a_controller_from_a_few_hundred_frames_steers_like_the_expert(straight, straight_demos, trained_dlm):
+    drive, _ = straight
     demos = straight_demos
     assert 300 <= np.sum(demos.route < 2) <= 700 and demos.perturbed.mean() > 0.1
-    model, _history, metrics = fit(drive, demos, str(tmp_path / "controller.ckpt"))
-    assert metrics["best/val/steer_mae"] < 0.1
+    model, _metrics, path = trained_dlm
+    errors, zero = val_errors(model, drive, demos), zero_answer_errors(drive, demos)
+    assert learnt(errors, zero, "steer"), (errors, zero)
     assert model(torch_inputs(demos)).shape == (2, 2)
-    loaded = load_controller(tmp_path / "controller.ckpt", (48, 64, 3))
+    load_controller(path, (48, 64, 3))
     with pytest.raises(InputError, match="trained on 64x48x3 images, not 160x48x3"):
-        load_controller(tmp_path / "controller.ckpt", (48, 160, 3))
-    status, lateral = _closed_loop(sim, lambda obs: loaded.act(obs.image, obs.speed, 0))
-    assert status == SUCCESS
-    assert np.max(np.abs(lateral[30:])) < 0.8  # back in the lane's middle after 3 s, and kept there
-    assert np.mean(np.abs(lateral[30:])) < 0.4
+        load_controller(path, (48, 160, 3))
+
+
+@pytest.mark.parametrize("driver", ["trained", *BASELINES])
+def test_the_trained_controller_keeps_its_lane_and_no_baseline_does(straight, trained_dlm, driver):
+    drive, sim = straight
+    loaded = load_controller(trained_dlm[2], (48, 64, 3))
+    controller = loaded if driver == "trained" else ConstantSteer(BASELINES[driver], drive)
+    status, lateral = _closed_loop(sim, lambda obs: controller.act(obs.image, obs.speed, 0))
+    assert keeps_its_lane(status, lateral) == (driver == "trained"), (status, np.abs(lateral[30:]).max())
+
+
+@pytest.mark.parametrize(("agent", "output"), [("dlm", "steer"), ("dlm", "waypoints"), ("lp", "steer"), ("lp", "waypoints")])
+def test_random_weights_fail_the_bound_on_the_trained_controllers(straight, straight_demos, agent, output):
+    """The bound on each trained controller's errors (:func:`learnt`, above and below) is not met by its untrained
+    network (nor, by its definition, by a zero answer)."""
+    drive, _ = straight
+    prior = agent == "lp" and output == "waypoints"  # as the trained Topo-LPs below: path noise of their training
+    conf = drive | {"network": {**drive["network"], "output": {"dlm": "steer", "lp": "steer", agent: output},
+                                "path_prior": prior},
+                    "path_noise": {"shift_m": 0.75, "yaw_deg": 1.5} if prior else {"shift_m": 2.0, "yaw_deg": 3.0}}
+    torch.manual_seed(0)
+    untrained = build_model(conf, straight_demos, agent)
+    errors, zero = val_errors(untrained, conf, straight_demos, agent), zero_answer_errors(drive, straight_demos)
+    assert not learnt(errors, zero, "lane_points_m" if output == "waypoints" else "steer"), (errors, zero)
 
 
 def torch_inputs(demos: Demonstrations, agent: str = "dlm"):
@@ -97,7 +103,8 @@ def test_a_waypoint_controller_learns_the_lane_points(straight, straight_demos, 
     conf = drive | {"network": {**drive["network"], "output": {"dlm": "waypoints", "lp": "steer"}}}
     model, _history, metrics = fit(conf, straight_demos, str(tmp_path / "wp.ckpt"))
     assert model.n_outputs == 2 * len(WAYPOINT_ARCS) + 1
-    assert metrics["best/val/steer_mae"] < 0.1
+    errors, zero = val_errors(model, conf, straight_demos), zero_answer_errors(drive, straight_demos)
+    assert learnt(errors, zero, "lane_points_m"), (errors, zero)
     assert model(torch_inputs(straight_demos)).shape == (2, 2)
     loaded = load_controller(tmp_path / "wp.ckpt", (48, 64, 3))
     assert loaded.hparams.output == "waypoints"
@@ -138,9 +145,10 @@ def test_a_waypoint_controller_is_logged_to_mlflow_with_its_signature(straight, 
 
 def test_topo_lp_learns_the_same_road_from_its_local_path(straight, straight_demos, tmp_path):
     drive, sim = straight
-    model, _history, metrics = fit(drive | {"path_noise": {"shift_m": 2.0, "yaw_deg": 3.0}}, straight_demos,
-                                   str(tmp_path / "lp.ckpt"), agent="lp")
-    assert metrics["best/val/steer_mae"] < 0.1
+    conf = drive | {"path_noise": {"shift_m": 2.0, "yaw_deg": 3.0}}
+    model, _history, metrics = fit(conf, straight_demos, str(tmp_path / "lp.ckpt"), agent="lp")
+    errors, zero = val_errors(model, conf, straight_demos, "lp"), zero_answer_errors(drive, straight_demos)
+    assert learnt(errors, zero, "steer"), (errors, zero)
     assert model(torch_inputs(straight_demos, "lp")).shape == (2, 2)
     loaded = load_controller(tmp_path / "lp.ckpt", (48, 64, 3), cls=TopoLP)
     with pytest.raises(InputError, match="not a controller checkpoint"):
@@ -222,7 +230,8 @@ def test_a_path_prior_topo_lp_learns_the_lane_points_from_its_path(straight, str
     conf = drive | {"network": {**drive["network"], "output": {"dlm": "steer", "lp": "waypoints"}, "path_prior": True},
                     "train": {**drive["train"], "image_dropout": 0.3}, "path_noise": {"shift_m": 0.75, "yaw_deg": 1.5}}
     model, _history, metrics = fit(conf, straight_demos, str(tmp_path / "lp.ckpt"), agent="lp")
-    assert metrics["best/val/steer_mae"] < 0.1
+    errors, zero = val_errors(model, conf, straight_demos, "lp"), zero_answer_errors(drive, straight_demos)
+    assert learnt(errors, zero, "lane_points_m"), (errors, zero)
     loaded = load_controller(tmp_path / "lp.ckpt", (48, 64, 3), cls=TopoLP)
     assert loaded.hparams.path_prior and loaded.hparams.image_dropout == 0.3
     inputs = torch_inputs(straight_demos, "lp")

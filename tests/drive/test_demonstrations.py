@@ -8,6 +8,7 @@ import pytest
 
 from tests.conftest import make_config
 from tests.drive.conftest import drive_conf, node_at, route_scene, town_route
+from topoloc.drive.controller_training import DemoData
 from topoloc.drive.demonstrations import (
     LOCAL_PATH_M,
     Demonstrations,
@@ -21,11 +22,11 @@ from topoloc.drive.demonstrations import (
     sharp_m,
     training_route,
 )
+from topoloc.drive.drive_route import build_route
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
-from topoloc.drive.lanes import build_route, plan_route
+from topoloc.drive.route_planning import plan_route
 from topoloc.drive.routes import make_simulator, random_drive_route
 from topoloc.drive.simulator import SUCCESS, Simulator, VehicleSpec
-from topoloc.drive.train_controller import DemoData
 from topoloc.render.rig import StereoRig
 
 

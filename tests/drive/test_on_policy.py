@@ -1,6 +1,7 @@
 """The controller at the wheel: in DAgger the expert takes over from a controller heading off the road and labels
-every state the controller reached; the closed-loop check tells a controller that drives from one that does not; the
-train_controller stage runs both end to end on the town."""
+every state the controller reached; the closed-loop check tells a controller that drives from one that does not (the
+expert from full left; a trained controller from always straight and always left); the train_controller stage runs
+both end to end on the town."""
 
 from __future__ import annotations
 
@@ -12,16 +13,17 @@ import pandas as pd
 import pytest
 
 from tests.conftest import make_config
-from tests.drive.conftest import drive_conf, node_at, route_scene
+from tests.drive.conftest import BASELINES, ConstantSteer, drive_conf, node_at, route_scene
 from topoloc.config import deep_merge
 from topoloc.drive import simulate_demonstrations, train_controller
 from topoloc.drive.config_slices import controller_slice
 from topoloc.drive.controller import load_controller
+from topoloc.drive.drive_route import build_route
 from topoloc.drive.expert import Expert, ExpertSettings
-from topoloc.drive.lanes import build_route, plan_route
 from topoloc.drive.on_policy import DaggerSettings, closed_loop_check, drive_on_policy, offset_ahead
+from topoloc.drive.route_planning import plan_route
 from topoloc.drive.routes import make_simulator, random_drive_route
-from topoloc.drive.simulator import SUCCESS, Simulator, VehicleSpec
+from topoloc.drive.simulator import OUTCOMES, SUCCESS, Simulator, VehicleSpec
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.render.rig import StereoRig
@@ -125,6 +127,23 @@ def test_the_closed_loop_check_tells_a_driver_from_a_wreck(town):
     assert sum(v for k, v in bad.items() if k in ("check/off_road", "check/wrong_road", "check/reversed")) == 3
 
 
+#: The closed-loop check's bound on a controller that drives (the straight road's trained Topo-DLM).
+CHECK_SUCCESS = 0.75
+
+
+@pytest.mark.parametrize("driver", ["trained", *BASELINES])
+def test_the_closed_loop_check_passes_a_trained_controller_and_no_baseline(straight, trained_dlm, driver):
+    """The check of train_controller on four drives of the straight road under a condition its controller never saw,
+    each from its own seeded start offset (``drive.follow``: widened to 0.5 m and 3 degrees)."""
+    drive, sim = straight
+    conf = {"drive": deep_merge(drive, {"check": {"routes": 4}, "follow": {"start_lateral_m": 0.5, "start_yaw_deg": 3.0}}),
+            "place": {"image": {"color": True}, "repeat_conditions": ["overcast"]}}
+    controller = trained_dlm[0].eval() if driver == "trained" else ConstantSteer(BASELINES[driver], drive)
+    metrics = closed_loop_check(controller, "dlm", conf, None, lambda rng: sim.route, lambda route: sim)
+    assert metrics["check/routes"] == 4
+    assert (metrics["check/success_rate"] >= CHECK_SUCCESS) == (driver == "trained"), metrics
+
+
 def town_config() -> dict:
     """The whole config on the town: short routes, small images and networks, three repeat conditions."""
     return make_config(
@@ -157,7 +176,8 @@ def test_train_controller_runs_its_dagger_rounds_and_check_on_the_town(town, tmp
     assert history.step.is_monotonic_increasing
     assert metrics["dagger/1/drives"] == 2.0 and metrics["dagger/2/steps"] > 20  # the two training routes, each round
     assert json.loads(Path(outputs["metrics"]).read_text()) == pytest.approx(metrics)
-    assert metrics["check/routes"] == 3 and 0.0 <= metrics["check/success_rate"] <= 1.0
+    failures = sum(metrics.get(f"check/{outcome}", 0.0) for outcome in OUTCOMES if outcome != SUCCESS)
+    assert metrics["check/routes"] == 3 and metrics["check/success_rate"] * 3 + failures == pytest.approx(3)
     load_controller(outputs["model"], (48, 64, 3))
     wide = deep_merge(conf, {"drive": {"camera": {"hfov_deg": 120.0}}})  # another camera than the demonstrations'
     with pytest.raises(InputError, match=r"demos\.npz.*recorded with 64x48x3 images, but drive\.camera .* give 130x48x3"):

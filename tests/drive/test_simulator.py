@@ -9,16 +9,10 @@ from tests.conftest import make_config, write_osm
 from tests.drive.conftest import TOWN_ROUTES, drive_conf, node_at, route_scene, town_route
 from tests.render.conftest import lonlat
 from topoloc.drive.demonstrations import training_route
+from topoloc.drive.drive_route import build_route
 from topoloc.drive.expert import Expert, ExpertSettings
-from topoloc.drive.lanes import (
-    DENSE_M,
-    build_route,
-    check_route,
-    lane_curvature,
-    lane_polyline,
-    plan_route,
-    widen_bends,
-)
+from topoloc.drive.lane_geometry import DENSE_M, lane_curvature, lane_polyline, widen_bends
+from topoloc.drive.route_planning import check_route, plan_route
 from topoloc.drive.routes import random_drive_route, route_of_edges
 from topoloc.drive.simulator import (
     OFF_ROAD,

@@ -8,7 +8,8 @@ import pytest
 from topoloc.config import load
 from topoloc.errors import InputError
 from topoloc.localizer import PLACE_OBSERVATIONS, ROAD_OBSERVATIONS, Answer, run_batch
-from topoloc.place.localize import (
+from topoloc.place.markov import FilterSettings, markov_localize
+from topoloc.place.topometric_localization import (
     MATCH,
     NO_MATCH,
     RELOC_FAIL,
@@ -20,7 +21,6 @@ from topoloc.place.localize import (
     drive_frames,
     localize,
 )
-from topoloc.place.markov import FilterSettings, markov_localize
 from topoloc.place.topometric_map import TopometricMap
 from topoloc.registry import check_names, make, registry
 

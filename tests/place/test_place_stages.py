@@ -5,9 +5,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import lightning as L
 import numpy as np
 import pandas as pd
 import pytest
+import torch
 
 from tests.place.conftest import place_conf, render_conf
 from topoloc.errors import InputError
@@ -15,6 +17,9 @@ from topoloc.graph.road_graph import RoadGraph
 from topoloc.place import build_topometric_map, localize_repeat, render_places, train_retrieval
 from topoloc.place.images import PlaceSet, polyline_distance, route_path
 from topoloc.place.network import SiameseNet
+from topoloc.place.pair_data import PairData
+from topoloc.place.train_retrieval import build_model, window_top1
+from topoloc.render.conditions import check_conditions
 
 
 def outputs(root: Path, names: dict[str, str]) -> dict[str, str]:
@@ -66,12 +71,46 @@ def test_place_sets(stages, town):
     assert stats["min_distance_to_route_m"] >= 20.0 and stats["images"] == 6 * len(train)
 
 
+class ChanceScores:
+    """A retrieval model that scores every pair at random: chance retrieval."""
+
+    def __init__(self, seed: int) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def embed(self, images: np.ndarray) -> np.ndarray:
+        return np.zeros((len(images), 1), np.float32)
+
+    def same_place(self, query: np.ndarray, refs: np.ndarray) -> np.ndarray:
+        return self.rng.random(len(refs))
+
+
+#: The mean of ``window_top1_<condition>`` over the repeat conditions that retrieval must reach (chance does not).
+RETRIEVAL_TOP1 = 0.5
+#: The trained network's validation loss (4 steps) is under this share of that of every network with random weights.
+LOSS_SHARE = 0.95
+
+
 def test_training_outputs(stages):
-    metrics = stages["train_metrics"]
-    assert metrics["steps"] == 4 and metrics["epochs"] >= 0
-    for name in ("clear_noon", "overcast", "sunset", "rain", "fog", "night"):
-        assert 0.0 <= metrics[f"best/val/acc_{name}"] <= 1.0
-    assert {f"window_top1_{c}" for c in ("overcast", "fog", "night")} <= set(metrics)
+    metrics, place = stages["train_metrics"], stages["place"]
+    assert metrics["steps"] == 4 and metrics["epochs"] == 1
+    assert {f"best/val/acc_{name}" for name in ("clear_noon", "overcast", "sunset", "rain", "fog", "night")} <= set(metrics)
+    # Training lowered the validation loss below that of random weights (three draws), on the same validation pairs.
+    places = PlaceSet.load(stages["train"]["places"])
+    data = PairData(places, check_conditions(place)["train"], place["train"], place["pairs"])
+    trainer = L.Trainer(accelerator="cpu", logger=False, enable_progress_bar=False, enable_model_summary=False)
+    random_losses = []
+    for seed in (1, 2, 3):
+        torch.manual_seed(seed)
+        untrained = build_model(place, places.images.shape[-1], places.conditions)
+        random_losses.append(trainer.validate(untrained, datamodule=data, verbose=False)[0]["val/loss"])
+    assert metrics["best/val/loss"] < LOSS_SHARE * min(random_losses), (metrics["best/val/loss"], random_losses)
+    # Retrieval in the localization's window finds a place within 5 m more often than chance retrieval does.
+    repeat = place["repeat_conditions"]
+    top1 = np.mean([metrics[f"window_top1_{c}"] for c in repeat])
+    chance = window_top1(ChanceScores(0), places, data.val_idx, places.conditions.index(place["teach_condition"]),
+                         int(place["localize"]["window"]))
+    chance_top1 = np.mean([chance[f"window_top1_{c}"] for c in repeat])
+    assert top1 >= RETRIEVAL_TOP1 > chance_top1, (top1, chance_top1)
     history = pd.read_csv(stages["retrieval"]["history"])
     assert history["train/loss"].notna().any() and history["val/loss"].notna().any()
     assert metrics["best/val/loss"] == pytest.approx(history["val/loss"].min())
@@ -95,7 +134,6 @@ def test_map_and_localization_outputs(stages):
                                                   "raw correlation + filter", "odometry only"]
     assert len(frames) == 5 * 5 * len(repeat)
     summary = pd.read_csv(stages["loc"]["summary"])
-    assert np.all((summary.within_2m <= summary.within_5m) & (summary.within_5m <= 1.0))
     table = Path(stages["loc"]["table"]).read_text()
     assert "| method | Mean | overcast | sunset | rain | fog (held out) | night |" in table
     metrics = stages["loc_metrics"]

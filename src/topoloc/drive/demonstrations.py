@@ -25,8 +25,9 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm import tqdm
 
+from topoloc.drive.drive_route import DriveRoute
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseInjector, NoiseSettings
-from topoloc.drive.lanes import DENSE_M, DriveRoute, lane_curvature
+from topoloc.drive.lane_geometry import DENSE_M, lane_curvature
 from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, VehicleState
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph

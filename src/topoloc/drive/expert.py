@@ -22,7 +22,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
 
-from topoloc.drive.lanes import DENSE_M, DriveRoute
+from topoloc.drive.drive_route import DriveRoute
+from topoloc.drive.lane_geometry import DENSE_M
 from topoloc.drive.simulator import Control, VehicleSpec, VehicleState
 from topoloc.errors import InputError
 

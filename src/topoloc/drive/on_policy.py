@@ -44,8 +44,8 @@ from topoloc.drive.demonstrations import (
     step_row,
     training_route,
 )
+from topoloc.drive.drive_route import DriveRoute
 from topoloc.drive.expert import Expert, ExpertSettings
-from topoloc.drive.lanes import DriveRoute
 from topoloc.drive.local_path import lane_frame_path, path_plane
 from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, step_vehicle
 from topoloc.errors import InputError

@@ -2,34 +2,29 @@
 
 * The **teach route** is the path of render route ``place.route`` (:func:`topoloc.render.drives.drive_path`,
   the route of the ``render_places`` teach drive and so of the topometric map), as a chain of road edges
-  whose lane (:mod:`topoloc.drive.lanes`) ends where that path ends.
+  whose lane (:mod:`topoloc.drive.drive_route`) ends where that path ends.
 * **Training routes** are random walks (:func:`topoloc.motion.route.random_route`, one-way roads respected,
   cut where they turn back at a dead end) seeded by ``drive.seed``, the route index and the attempt; a walk whose lane
   runs on other roads' carriageways for more than ``drive.lane.max_shared_m`` is drawn again (the images could not
   show which road to keep to).
 * A route's **simulator** renders the scene around its lane (``render.buildings``, ``render.view_distance_m``)
-  with the controller's camera (:func:`drive_rig`): the place images' camera (``place.image``) with rows added below
-  until it sees the ground ``drive.camera.nearest_ground_m`` ahead, and columns added on both sides until it sees
-  ``drive.camera.hfov_deg`` across. The place images' camera sees the road from 6.5 m on (at 160 x 48), farther than
-  the expert's aim point (4-5 m), and 82 deg across, less than a junction turn sweeps; the localization reads the
-  place image's window of each image (:func:`place_window`).
+  with the controller's camera (:func:`topoloc.drive.camera.drive_rig`).
 """
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import numpy as np
 
-from topoloc.drive.lanes import DriveRoute, build_route, route_froms
+from topoloc.drive.camera import drive_rig
+from topoloc.drive.drive_route import DriveRoute, build_route
+from topoloc.drive.route_planning import route_froms
 from topoloc.drive.simulator import Simulator, VehicleSpec
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.motion.route import random_route
-from topoloc.place.images import make_rig
 from topoloc.render.drives import drive_path
-from topoloc.render.rig import StereoRig
 from topoloc.render.scene import scene_for_path
 
 
@@ -85,53 +80,8 @@ def random_drive_route(graph: RoadGraph, conf: dict[str, Any], length_m: float, 
     return None if shared is not None and route.shared_m > float(shared) else route
 
 
-def drive_rig(conf: dict[str, Any]) -> StereoRig:
-    """The controller's camera: the place images' (``place.image``) with as many rows added below as it takes for the
-    bottom row to see the ground ``drive.camera.nearest_ground_m`` ahead (none when that is null or already seen), and
-    as many columns added on each side as it takes to see ``drive.camera.hfov_deg`` across (none when null)."""
-    rig = make_rig(conf["place"]["image"], conf["render"])
-    camera = conf["drive"]["camera"]
-    near, hfov = camera["nearest_ground_m"], camera.get("hfov_deg")
-    if near is not None:
-        rows = int(np.ceil(rig.cy + rig.camera_height * rig.f / float(near))) + 1  # row v sees the ground at h f / (v - cy)
-        rig = dataclasses.replace(rig, height=max(rig.height, rows))
-    if hfov is not None:
-        side = side_columns(rig, float(hfov))
-        rig = dataclasses.replace(rig, width=rig.width + 2 * side, cx=rig.cx + side)
-    return rig
-
-
-def hfov_deg(rig: StereoRig) -> float:
-    """The horizontal field of view of ``rig`` in degrees, from the outer edges of its first and last columns."""
-    return float(np.degrees(np.arctan((rig.cx + 0.5) / rig.f) + np.arctan((rig.width - 0.5 - rig.cx) / rig.f)))
-
-
-def side_columns(rig: StereoRig, hfov: float) -> int:
-    """The fewest columns to add on each side of ``rig`` for it to see at least ``hfov`` degrees across."""
-    if not 0.0 < hfov < 180.0:
-        raise InputError("drive.camera.hfov_deg", f"a horizontal field of view between 0 and 180 degrees, got {hfov}")
-    side = max(0, int(np.floor(rig.f * np.tan(np.radians(hfov) / 2.0) - rig.width / 2.0)))
-    while hfov_deg(dataclasses.replace(rig, width=rig.width + 2 * side, cx=rig.cx + side)) < hfov:
-        side += 1
-    return side
-
-
-def place_window(conf: dict[str, Any]) -> tuple[slice, slice]:
-    """The rows and columns of the controller's image (:func:`drive_rig`) that are the place images' camera: its top
-    ``place.image.height`` rows, and the ``place.image.width`` columns between the ones added on each side."""
-    image = conf["place"]["image"]
-    side = (drive_rig(conf).width - int(image["width"])) // 2
-    return slice(0, int(image["height"])), slice(side, side + int(image["width"]))
-
-
-def image_shape(conf: dict[str, Any]) -> tuple[int, int, int]:
-    """(H, W, C) of the controller's images (:func:`drive_rig`, ``place.image.color``)."""
-    rig = drive_rig(conf)
-    return rig.height, rig.width, 3 if conf["place"]["image"]["color"] else 1
-
-
 def make_simulator(osm: str | None, graph: RoadGraph, route: DriveRoute, conf: dict[str, Any]) -> Simulator:
-    """The simulator of ``route``: its scene, the controller's camera (:func:`drive_rig`), the ``drive`` vehicle and
+    """The simulator of ``route``: its scene, the controller's camera (:func:`~topoloc.drive.camera.drive_rig`), the ``drive`` vehicle and
     episode rules."""
     render = conf["render"]
     scene = scene_for_path(osm, graph, route.xy, {**render["buildings"], "view_distance_m": float(render["view_distance_m"])},

@@ -7,7 +7,7 @@
   A control is ``steer`` in [-1, 1] (+1: full left, counter-clockwise) and ``throttle`` in [-1, 1].
 * **Camera**: at every step the renderer of :mod:`topoloc.render` draws the camera image at the vehicle's
   true pose (the middle of the wheelbase, looking along its heading) under the episode's condition.
-* **Episode end** (judged at the middle of the wheelbase, on the rasters of :class:`~topoloc.drive.lanes.DriveRoute`):
+* **Episode end** (judged at the middle of the wheelbase, on the rasters of :class:`~topoloc.drive.drive_route.DriveRoute`):
   ``success`` when the progress along the lane is within ``goal_m`` of its end; ``off_road`` off every
   carriageway; ``wrong_road`` on a carriageway that is not the route's (a wrong turn at an intersection);
   ``reversed`` when the heading is more than ``reversed_deg`` off the lane's; ``timeout`` after the time the
@@ -25,7 +25,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from topoloc.drive.lanes import DriveRoute
+from topoloc.drive.drive_route import DriveRoute
 from topoloc.errors import InputError
 from topoloc.render.conditions import get_condition
 from topoloc.render.renderer import Renderer

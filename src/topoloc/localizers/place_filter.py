@@ -6,8 +6,8 @@ from __future__ import annotations
 from typing import Any
 
 from topoloc.localizer import register
-from topoloc.place.localize import Frame, PlaceLocalizer, Step
 from topoloc.place.markov import BayesFilter, FilterSettings
+from topoloc.place.topometric_localization import Frame, PlaceLocalizer, Step
 
 
 @register

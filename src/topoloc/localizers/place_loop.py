@@ -1,5 +1,5 @@
 """The paper's teach-and-repeat loop (Cai & Wan): window search, odometry fallback, global relocalization
-(:class:`topoloc.place.localize.WindowSearch`) as a localizer on the topometric map."""
+(:class:`topoloc.place.topometric_localization.WindowSearch`) as a localizer on the topometric map."""
 
 from __future__ import annotations
 
@@ -8,7 +8,13 @@ from typing import Any
 import numpy as np
 
 from topoloc.localizer import register
-from topoloc.place.localize import Frame, LocalizeSettings, PlaceLocalizer, Step, WindowSearch
+from topoloc.place.topometric_localization import (
+    Frame,
+    LocalizeSettings,
+    PlaceLocalizer,
+    Step,
+    WindowSearch,
+)
 
 
 @register

@@ -1,4 +1,4 @@
-"""Odometry alone on the topometric map (:class:`topoloc.place.localize.PathIntegration`): the reference of
+"""Odometry alone on the topometric map (:class:`topoloc.place.topometric_localization.PathIntegration`): the reference of
 the teach-and-repeat tables, which looks at no image."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from topoloc.localizer import register
-from topoloc.place.localize import Frame, PathIntegration, PlaceLocalizer, Step
+from topoloc.place.topometric_localization import Frame, PathIntegration, PlaceLocalizer, Step
 
 
 @register

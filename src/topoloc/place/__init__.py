@@ -9,7 +9,7 @@
 * :mod:`~topoloc.place.odometry`: path integration of noisy odometry;
 * :mod:`~topoloc.place.topometric_map`: vertices and navigation commands;
   :mod:`~topoloc.place.build_topometric_map`: the ``build_topometric_map`` stage;
-* :mod:`~topoloc.place.localize`: the paper's loop: window search, odometry fallback and global
+* :mod:`~topoloc.place.topometric_localization`: the paper's loop: window search, odometry fallback and global
   relocalization; scorers;
 * :mod:`~topoloc.place.markov`: Markov localization, a Bayes filter over the vertices (beyond the paper);
 * :mod:`~topoloc.place.localize_repeat`: the ``localize_repeat`` stage and its tables;

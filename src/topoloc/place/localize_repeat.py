@@ -2,7 +2,7 @@
 
 Per repeat condition the drive's odometry is drawn from the noise model (an independent scale error per
 drive, :mod:`topoloc.place.odometry`) and the place localizers of ``localize.localizers`` (registry names,
-:mod:`topoloc.localizers`: ``place_loop``, the paper's loop of :mod:`topoloc.place.localize`;
+:mod:`topoloc.localizers`: ``place_loop``, the paper's loop of :mod:`topoloc.place.topometric_localization`;
 ``place_filter``, beyond the paper, the Bayes filter of :mod:`topoloc.place.markov`, settings
 ``localize.filter``; ``place_odometry``, path integration alone, the reference) run on the frames scored by
 
@@ -35,7 +35,10 @@ from topoloc.errors import InputError
 from topoloc.io import atomic_path, write_json, write_text
 from topoloc.localizer import PLACE_OBSERVATIONS, run_batch
 from topoloc.place.images import PlaceSet
-from topoloc.place.localize import (
+from topoloc.place.network import load_model
+from topoloc.place.odometry import noisy_odometry
+from topoloc.place.plot import bars_figure, errors_figure
+from topoloc.place.topometric_localization import (
     MATCH,
     RELOC_FAIL,
     RELOC_OK,
@@ -47,12 +50,10 @@ from topoloc.place.localize import (
     correlation_descriptors,
     drive_frames,
 )
-from topoloc.place.network import load_model
-from topoloc.place.odometry import noisy_odometry
-from topoloc.place.plot import bars_figure, errors_figure
 from topoloc.place.topometric_map import TopometricMap
 from topoloc.registry import check_names, make
 from topoloc.render.conditions import check_conditions
+from topoloc.report_tables import condition_table
 
 log = logging.getLogger(__name__)
 
@@ -91,17 +92,6 @@ def summarize(frames: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def paper_table(summary: pd.DataFrame, column: str, held_out: list[str], fmt: str = "{:.3f}") -> str:
-    """A markdown table like the paper's Tables 1 and 2: one row per method, the mean, one column per condition."""
-    conditions = list(dict.fromkeys(summary.condition))
-    header = ["method", "Mean", *[f"{c} (held out)" if c in held_out else c for c in conditions]]
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    for method in dict.fromkeys(summary.method):
-        rows = summary[summary.method == method].set_index("condition").loc[conditions, column]
-        lines.append("| " + " | ".join([method, fmt.format(rows.mean()), *[fmt.format(v) for v in rows]]) + " |")
-    return "\n".join(lines)
-
-
 def tables_markdown(summary: pd.DataFrame, names: dict[str, list[str]], facts: dict[str, float]) -> str:
     """All tables of the stage, with a caption each."""
     held = names["held_out"]
@@ -113,7 +103,7 @@ def tables_markdown(summary: pd.DataFrame, names: dict[str, list[str]], facts: d
                                ("Accepted window matches", "matches", "{:.0f}"),
                                ("Accepted matches more than 5 m off", "false_matches", "{:.0f}"),
                                ("Median localization error (m)", "median_error_m", "{:.2f}")):
-        parts += [f"## {title}", "", paper_table(summary, column, held, fmt), ""]
+        parts += [f"## {title}", "", condition_table(summary, "method", column, held, fmt, "method"), ""]
     parts.append(f"Network embedding: {facts['embed_images_per_s']:.0f} images/s on this machine.")
     return "\n".join(parts) + "\n"
 

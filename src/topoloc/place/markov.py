@@ -1,6 +1,6 @@
 """Markov localization on the topometric map: a Bayes filter over the vertices (beyond the paper).
 
-The paper's loop (:mod:`topoloc.place.localize`) commits to one vertex per frame: a false match above the
+The paper's loop (:mod:`topoloc.place.topometric_localization`) commits to one vertex per frame: a false match above the
 threshold moves the estimate, and a look-alike place inside the window can hold it there. The filter
 keeps a belief, a probability per vertex, and per repeat frame ``t``
 
@@ -28,7 +28,13 @@ from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
 
 from topoloc.errors import InputError
-from topoloc.place.localize import MatrixScorer, Step, Trace, checked_vertex_s, drive_frames
+from topoloc.place.topometric_localization import (
+    MatrixScorer,
+    Step,
+    Trace,
+    checked_vertex_s,
+    drive_frames,
+)
 
 FILTER = "filter"  # the event of every frame of a filter trace
 

@@ -36,8 +36,8 @@ from topoloc.geometry import heading_change
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
 from topoloc.place.images import PlaceSet
-from topoloc.place.localize import correlation_descriptors
 from topoloc.place.odometry import noisy_odometry
+from topoloc.place.topometric_localization import correlation_descriptors
 
 COMMANDS = ("follow", "left", "right", "straight")
 

@@ -73,7 +73,7 @@ def edge_widths(edges: pd.DataFrame) -> NDArray[np.float64]:
 
 def has_centre_line(width_m: float, two_way: bool) -> bool:
     """Whether a carriageway is drawn with a dashed centre line: two-way and at least :data:`MARKED_WIDTH_M` wide.
-    A driver keeps right of such a line and drives in the middle of any other road (:mod:`topoloc.drive.lanes`)."""
+    A driver keeps right of such a line and drives in the middle of any other road (:mod:`topoloc.drive.drive_route`)."""
     return bool(two_way and width_m >= MARKED_WIDTH_M)
 
 

@@ -8,7 +8,7 @@ other roads (one-way, or narrower and unmarked: a driver takes the middle, and a
 there from the middle), then smoothed with a Gaussian of ``smoothing_m`` (corners become curves), sampled every
 :data:`DENSE_M`; bends still tighter than ``min_radius_m`` (the lane offset on the inside of a junction corner
 can leave a radius of 1 m, which no car can follow) are widened by smoothing them further, locally
-(:func:`widen_bends`), so the vehicle can follow every lane it is given. The carriageway width is the
+(:func:`topoloc.drive.lane_geometry.widen_bends`), so the vehicle can follow every lane it is given. The carriageway width is the
 renderer's (:func:`topoloc.render.textures.carriageway_width`: what the images show): the road's OSM ``width`` tag,
 else its ``lanes`` tag times a lane width, else a per-class default. Each lane sample carries its road edge and the **navigation command** of Cai & Wan
 (``follow``, or ``left`` / ``right`` / ``straight`` within ``command_m`` before an intersection: the drive's heading
@@ -18,104 +18,33 @@ change from there to ``lookahead_m`` past it), from
 Two rasters (0.25 m cells) judge where the vehicle is: the **drivable area** (every road of the graph near
 the route, as wide as its carriageway plus ``margin_m``) and the **corridor** (the route's own roads only).
 A point off the drivable area is *off road*; on it but off the corridor, on a *wrong road*. Lane points on another
-road's carriageway too, away from junctions, are **shared** (:func:`shared_samples`): there the images show one surface
+road's carriageway too, away from junctions, are **shared** (:func:`topoloc.drive.lane_rasters.shared_samples`): there the images show one surface
 and cannot tell the route's road from the other; training and check routes keep clear of them
 (``drive.lane.max_shared_m``).
 """
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass, field
 
-import cv2
-import networkx as nx
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import gaussian_filter1d
-from scipy.spatial import cKDTree
 
+from topoloc.drive.lane_geometry import DENSE_M, lane_polyline, widen_bends
+from topoloc.drive.lane_rasters import CELL_M, RASTER_MARGIN_M, road_raster, shared_samples
+from topoloc.drive.route_planning import check_route
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.motion.route import sample_route
-from topoloc.place.topometric_map import COMMANDS, route_intersections, vertex_commands
+from topoloc.place.topometric_map import route_intersections, vertex_commands
 from topoloc.render.textures import edge_widths, has_centre_line
-
-DENSE_M = 0.25
-CELL_M = 0.25
-RASTER_MARGIN_M = 40.0
-#: Lane points this close to a junction are not counted as shared with the crossing roads (:func:`shared_samples`).
-JUNCTION_M = 15.0
-
-
-def check_route(graph: RoadGraph, edges: list[int], froms: list[int], where: str = "route") -> None:
-    """InputError naming ``where`` unless the edges chain up end to end and none is driven against its one-way."""
-    if not edges or len(edges) != len(froms):
-        raise InputError(where, "a route needs at least one edge and one entry node per edge")
-    for i, (e, f) in enumerate(zip(edges, froms)):
-        if not 0 <= int(e) < graph.num_edges:
-            raise InputError(where, f"edge {e} is not in the road graph ({graph.num_edges} edges)")
-        u, v = int(graph.edges.u.iat[e]), int(graph.edges.v.iat[e])
-        if f not in (u, v):
-            raise InputError(where, f"edge {e} does not start at node {f}")
-        ow = int(graph.edges.oneway.iat[e])
-        if ow == 1 and f != u or ow == -1 and f != v:
-            raise InputError(where, f"edge {e} ({graph.edges['name'].iat[e] or graph.edges.highway.iat[e]}) is one-way "
-                             f"against the route: it cannot be driven from node {f}")
-        if i and graph.other_end(edges[i - 1], froms[i - 1]) != f:
-            raise InputError(where, f"edge {e} does not continue edge {edges[i - 1]}: the route is not connected")
-
-
-def plan_route(graph: RoadGraph, start: int, goal: int) -> tuple[list[int], list[int]]:
-    """The shortest drivable chain of edges from node ``start`` to node ``goal`` (one-way roads respected).
-
-    InputError when either node is not in the graph or the goal cannot be reached (a disconnected goal, or
-    one reachable only against one-way roads).
-    """
-    for name, node in (("start", start), ("goal", goal)):
-        if node not in graph.nodes.index:
-            raise InputError(f"route.{name}", f"node {node} is not in the road graph")
-    directed = nx.DiGraph()
-    for e in range(graph.num_edges):
-        u, v, ow, length = (int(graph.edges.u.iat[e]), int(graph.edges.v.iat[e]), int(graph.edges.oneway.iat[e]),
-                            float(graph.edges.length_m.iat[e]))
-        for a, b, ok in ((u, v, ow >= 0), (v, u, ow <= 0)):
-            if ok and (not directed.has_edge(a, b) or directed[a][b]["length"] > length):
-                directed.add_edge(a, b, length=length, edge=e)
-    try:
-        nodes = nx.shortest_path(directed, start, goal, weight="length")
-    except (nx.NetworkXNoPath, nx.NodeNotFound) as err:
-        raise InputError("route", f"no drivable route from node {start} to node {goal} (one-way roads or a "
-                         "disconnected goal)") from err
-    if len(nodes) < 2:
-        raise InputError("route", "start and goal are the same node")
-    return [int(directed[a][b]["edge"]) for a, b in itertools.pairwise(nodes)], [int(a) for a in nodes[:-1]]
-
-
-def route_froms(graph: RoadGraph, edges: list[int], start_xy: NDArray[np.float64]) -> list[int]:
-    """The entry node of each edge of a connected chain (the first: the end nearer to ``start_xy``)."""
-    froms: list[int] = []
-    for i, e in enumerate(edges):
-        u, v = int(graph.edges.u.iat[e]), int(graph.edges.v.iat[e])
-        if i == 0:
-            nxt = {int(graph.edges.u.iat[edges[1]]), int(graph.edges.v.iat[edges[1]])} if len(edges) > 1 else set()
-            shared = {u, v} & nxt
-            froms.append(_nearer(graph, (u, v), start_xy) if len(shared) != 1 or u == v else (v if u in shared else u))
-        else:
-            froms.append(graph.other_end(edges[i - 1], froms[-1]))
-    return froms
-
-
-def _nearer(graph: RoadGraph, nodes: tuple[int, int], xy: NDArray[np.float64]) -> int:
-    pos = graph.nodes.loc[list(nodes), ["x", "y"]].to_numpy(float)
-    return int(nodes[int(np.argmin(np.hypot(*(pos - np.asarray(xy, float)).T)))])
 
 
 @dataclass
 class DriveRoute:
     """The lane of a route (see the module docstring): samples ``xy``, heading ``yaw``, arc length ``s``, road
-    ``edge``, carriageway ``width``, ``command`` (index into :data:`COMMANDS`) and ``shared`` (on another road's
-    carriageway too, :func:`shared_samples`) every :data:`DENSE_M`."""
+    ``edge``, carriageway ``width``, ``command`` (index into :data:`topoloc.place.topometric_map.COMMANDS`) and ``shared`` (on another road's
+    carriageway too, :func:`~topoloc.drive.lane_rasters.shared_samples`) every :data:`DENSE_M`."""
 
     edges: list[int]
     froms: list[int]
@@ -213,7 +142,7 @@ class DriveRoute:
         keep = [i for i, e in enumerate(self.edges) if e in used]
         corridor = self.corridor
         if lo > 0 or hi < len(self.s):
-            band = _raster([(self.xy[lo:hi], 1.5 * float(self.width[lo:hi].max()))], self.origin, self.corridor.shape, 2.0)
+            band = road_raster([(self.xy[lo:hi], 1.5 * float(self.width[lo:hi].max()))], self.origin, self.corridor.shape, 2.0)
             corridor = self.corridor & band
         return DriveRoute([self.edges[i] for i in keep], [self.froms[i] for i in keep], self.xy[lo:hi], self.yaw[lo:hi],
                           self.s[lo:hi] - self.s[lo], self.edge[lo:hi], self.width[lo:hi], self.command[lo:hi],
@@ -221,86 +150,16 @@ class DriveRoute:
 
     @property
     def shared_m(self) -> float:
-        """Metres of the lane on another road's carriageway too (:func:`shared_samples`)."""
+        """Metres of the lane on another road's carriageway too (:func:`~topoloc.drive.lane_rasters.shared_samples`)."""
         return float(self.shared.sum()) * DENSE_M
 
-
-def lane_polyline(centre: NDArray[np.float64], offset: NDArray[np.float64], smoothing_m: float) -> NDArray[np.float64]:
-    """The dense centre line ``centre`` shifted ``offset`` metres to its right and smoothed over ``smoothing_m``."""
-    sigma = max(smoothing_m / DENSE_M, 1.0)
-    guide = gaussian_filter1d(centre, max(sigma, 3.0 * float(np.max(offset, initial=0.0)) / DENSE_M, 1.0), axis=0,
-                              mode="nearest")
-    tangent = np.gradient(guide, axis=0)
-    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
-    offset = gaussian_filter1d(offset, sigma, mode="nearest")
-    xy = centre + offset[:, None] * np.column_stack([tangent[:, 1], -tangent[:, 0]])
-    return gaussian_filter1d(xy, sigma, axis=0, mode="nearest")
-
-
-def lane_curvature(xy: NDArray[np.float64]) -> NDArray[np.float64]:
-    """|curvature| (1/m) of a dense polyline, averaged over about a metre (what a vehicle has to follow)."""
-    d = np.gradient(xy, axis=0)
-    yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
-    step = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
-    return gaussian_filter1d(np.abs(np.gradient(yaw)) / step, 0.5 / DENSE_M, mode="nearest")
-
-
-def widen_bends(xy: NDArray[np.float64], min_radius_m: float, where: str = "route",
-                iterations: int = 400) -> NDArray[np.float64]:
-    """The dense lane ``xy`` with every bend tighter than ``min_radius_m`` widened: the samples in and around such a
-    bend are pulled towards a smoothed copy, repeatedly, until none is left (the rest of the lane is unchanged).
-
-    InputError naming ``where`` when a bend cannot be widened enough (a turn back on the spot).
-    """
-    if min_radius_m <= 0:
-        return xy
-    limit, xy = 1.0 / min_radius_m, np.array(xy, float)
-    for _ in range(iterations):
-        tight = lane_curvature(xy) > limit
-        if not tight.any():
-            return xy
-        weight = np.clip(4.0 * gaussian_filter1d(tight.astype(float), 2.0 / DENSE_M, mode="constant"), 0.0, 1.0)
-        weight[[0, -1]] = 0.0  # the ends stay where they are
-        xy += weight[:, None] * (gaussian_filter1d(xy, 1.0 / DENSE_M, axis=0, mode="nearest") - xy)
-    worst = int(np.argmax(lane_curvature(xy)))
-    s = float(np.hypot(*np.diff(xy[: worst + 1], axis=0).T).sum())
-    raise InputError(where, f"the lane turns on a radius of {1.0 / lane_curvature(xy)[worst]:.1f} m at {s:.0f} m "
-                     f"along it, tighter than drive.lane.min_radius_m = {min_radius_m} even after widening")
-
-
-def _raster(lines: list[tuple[NDArray[np.float64], float]], origin: tuple[float, float], shape: tuple[int, int],
-            margin_m: float) -> NDArray[np.uint8]:
-    out = np.zeros(shape, np.uint8)
-    for coords, width in lines:
-        px = np.round(np.column_stack([(coords[:, 0] - origin[0]) / CELL_M, (origin[1] - coords[:, 1]) / CELL_M]) * 4)
-        thick = max(1, round((width + 2 * margin_m) / CELL_M))
-        cv2.polylines(out, [px.astype(np.int32)], False, 1, thick, cv2.LINE_8, 2)
-    return out
-
-
-def shared_samples(xy: NDArray[np.float64], others: NDArray[np.uint8], origin: tuple[float, float],
-                   junctions: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """Which lane points ``xy`` lie on the carriageway of a road not on the route (raster ``others``) more than
-    :data:`JUNCTION_M` from every junction: where two roads are drawn over each other (a service road beside a street,
-    the two ways of a dual carriageway drawn too wide), and the camera shows one surface with no sign of which is the
-    route's. Near a junction the crossing roads' carriageways cover the lane as they should."""
-    rows = ((origin[1] - xy[:, 1]) / CELL_M).astype(int)
-    cols = ((xy[:, 0] - origin[0]) / CELL_M).astype(int)
-    h, w = others.shape
-    inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
-    on = np.zeros(len(xy), bool)
-    on[inside] = others[rows[inside], cols[inside]] > 0
-    if on.any() and len(junctions):
-        dist, _ = cKDTree(junctions).query(xy[on])
-        on[np.flatnonzero(on)[dist <= JUNCTION_M]] = False
-    return on
 
 
 def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_m: float = 4.0,
                 margin_m: float = 0.5, command_m: float = 20.0, lookahead_m: float = 10.0, straight_deg: float = 45.0,
                 where: str = "route", min_radius_m: float = 5.0) -> DriveRoute:
-    """The :class:`DriveRoute` of a chain of edges (checked with :func:`check_route`; bends widened to
-    ``min_radius_m`` by :func:`widen_bends`).
+    """The :class:`DriveRoute` of a chain of edges (checked with :func:`~topoloc.drive.route_planning.check_route`; bends
+    widened to ``min_radius_m`` by :func:`~topoloc.drive.lane_geometry.widen_bends`).
 
     InputError naming ``where`` when the lane leaves the route's own roads (no vehicle could follow it and stay on them).
     """
@@ -323,10 +182,10 @@ def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_
     origin = (float(lo[0]), float(hi[1]))
     shape = (int(np.ceil((hi[1] - lo[1]) / CELL_M)) + 1, int(np.ceil((hi[0] - lo[0]) / CELL_M)) + 1)
     near = [e for e in range(graph.num_edges) if np.any(np.all((graph.geometry[e] >= lo) & (graph.geometry[e] <= hi), axis=1))]
-    drivable = _raster([(graph.geometry[e], float(widths[e])) for e in near], origin, shape, margin_m)
-    corridor = _raster([(graph.geometry[e], float(widths[e])) for e in set(edges)],
+    drivable = road_raster([(graph.geometry[e], float(widths[e])) for e in near], origin, shape, margin_m)
+    corridor = road_raster([(graph.geometry[e], float(widths[e])) for e in set(edges)],
                        origin, shape, margin_m)
-    others = _raster([(graph.geometry[e], float(widths[e])) for e in near if e not in set(edges)], origin, shape, 0.0)
+    others = road_raster([(graph.geometry[e], float(widths[e])) for e in near if e not in set(edges)], origin, shape, 0.0)
     shared = shared_samples(xy, others, origin, graph.nodes.loc[graph.nodes.degree >= 3, ["x", "y"]].to_numpy(float))
     route = DriveRoute(list(edges), list(froms), xy, yaw, s, label, width, command, shared, drivable, corridor, origin)
     off = route.off_corridor()
@@ -334,8 +193,3 @@ def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_
         raise InputError(where, f"the lane leaves the route's roads at {s[int(np.argmax(off))]:.0f} m (a bend of a narrow "
                          f"road tighter than drive.lane.min_radius_m = {min_radius_m} m, or than the smoothing allows)")
     return route
-
-
-def command_name(index: int) -> str:
-    """The name of a command index."""
-    return COMMANDS[int(index)]

@@ -9,8 +9,8 @@ import pytest
 
 from tests.conftest import make_config
 from tests.drive.conftest import drive_conf, route_scene, town_route
-from topoloc.drive.closed_loop import PlaceLocalization
-from topoloc.drive.routes import drive_rig, hfov_deg, image_shape, place_window
+from topoloc.drive.camera import drive_rig, hfov_deg, image_shape, place_window
+from topoloc.drive.localization_adapters import PlaceLocalization
 from topoloc.place.images import make_rig
 from topoloc.render.conditions import get_condition
 from topoloc.render.renderer import Renderer

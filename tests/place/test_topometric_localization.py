@@ -7,7 +7,7 @@ import pytest
 
 from topoloc.config import load
 from topoloc.errors import InputError
-from topoloc.place.localize import (
+from topoloc.place.topometric_localization import (
     MATCH,
     NO_MATCH,
     ODOMETRY,
