@@ -34,7 +34,7 @@ import cv2  # noqa: E402
 import pyrosm  # noqa: E402
 
 from topoloc.config import load  # noqa: E402
-from topoloc.graph.build_graph import build_road_graph  # noqa: E402
+from topoloc.graph.from_osm import build_road_graph  # noqa: E402
 from topoloc.motion.poses import read_poses  # noqa: E402
 from topoloc.odometry.evaluate import evaluate  # noqa: E402
 from topoloc.odometry.stereo_vo import run_stereo_vo  # noqa: E402

@@ -38,9 +38,9 @@ def main() -> None:
 
         from topoloc.config import dotted_overrides, load
         from topoloc.trajectory.dataset import load_features, load_sequences
-        from topoloc.trajectory.evaluate_rnn import accuracy_by_position, prefix_majority
+        from topoloc.trajectory.accuracy import accuracy_by_position, prefix_majority
         from topoloc.trajectory.model import predict
-        from topoloc.trajectory.train_rnn import fit
+        from topoloc.trajectory.fitting import fit
 
         config = load(args.configfile, dotted_overrides(args.set))
         region = args.region or config["region"]["name"]

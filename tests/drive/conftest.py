@@ -10,7 +10,7 @@ import pytest
 from tests.conftest import make_config, write_osm
 from tests.render.conftest import lonlat, town  # noqa: F401 (the town fixture, re-exported)
 from topoloc.drive.lanes import DriveRoute, build_route, plan_route
-from topoloc.graph.build_graph import build_road_graph
+from topoloc.graph.from_osm import build_road_graph
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.render.scene import Scene, scene_for_path
 
