@@ -89,7 +89,7 @@ def localize_level(conf: dict[str, Any], level: str, figures: Path | None) -> tu
     for map_index, map_name in enumerate(exp["maps"]):
         osm = exp["osm"].get(map_name)
         if osm is None or not Path(osm).is_file():
-            raise InputError(f"{osm}: no OSM file for the city map {map_name!r} (experiments.city.osm)")
+            raise InputError(f"experiments.city.osm.{map_name}", f"no OSM file at {osm}")
         began = time.perf_counter()
         graph, _ = build_road_graph(str(osm), conf["graph"]["highway_classes"], float(conf["graph"]["virtual_node_spacing_m"]))
         road = RoadMap(graph, conf["localization"]["decode"]["u_turns"])

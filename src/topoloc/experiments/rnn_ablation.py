@@ -37,7 +37,7 @@ def parse_variant(name: str) -> tuple[str, int, bool]:
     """``lstm-128`` -> ("lstm", 128, True); ``gru-64-tokens`` -> ("gru", 64, False)."""
     parts = name.split("-")
     if len(parts) not in (2, 3) or not parts[1].isdigit() or (len(parts) == 3 and parts[2] != "tokens"):
-        raise InputError(f"experiments.rnn_ablation.variants: {name!r} is not CELL-HIDDEN or CELL-HIDDEN-tokens")
+        raise InputError("experiments.rnn_ablation.variants", f"{name!r} is not CELL-HIDDEN or CELL-HIDDEN-tokens")
     return parts[0], int(parts[1]), len(parts) == 2
 
 
@@ -94,7 +94,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     dataset_dim = int(stats.get("feature_dim", 0))
     cell, hidden, with_features = parse_variant(variant)
     if with_features and not dataset_dim:
-        raise InputError(f"{inputs['stats']}: the dataset has no features (dataset.simulated.features) for {variant}")
+        raise InputError(inputs["stats"], f"the dataset has no features (dataset.simulated.features) for {variant}")
     vconf = {"encoding": conf["encoding"], "train": conf["train"],
              "model": {**conf["model"], "cell": cell, "hidden_size": hidden}}
     began = time.perf_counter()

