@@ -1,23 +1,8 @@
 # Experiments: long runs over noise levels, seeds or variants, not part of `rule all`. Run one with
 # `snakemake experiment_<name> --cores N` (simulated, city, rnn_ablation, drive_seeds); settings: experiments.* of
 # the config. Each job is one MLflow run; each experiment ends in results/{region}/experiments/<name>/summary.md.
-from topoloc.config import deep_merge
-
-EXPERIMENTS = config["experiments"]
 EXPERIMENT = "results/{region}/experiments"
 LOCALIZATION_KEYS = ("localization", "segmentation", "encoding")
-
-
-def experiment_conf(*keys, **extra):
-    """The config sections ``keys`` and the experiment's settings ``extra``."""
-    return {**{k: config[k] for k in keys}, **extra}
-
-
-def simulated_inputs(wildcards):
-    """The kitti00 map's OSM file when it is one of the maps; a trajectory RNN per map that has one."""
-    exp = EXPERIMENTS["simulated"]
-    inputs = {"kitti00_osm": exp["kitti00_osm"]} if "kitti00" in exp["maps"] else {}
-    return inputs | {f"model_{name}": path for name, path in exp["models"].items() if name in exp["maps"]}
 
 
 rule localize_simulated:
@@ -111,20 +96,6 @@ rule experiment_city:
     """Target: the city-scale experiment."""
     input:
         expand(rules.summarize_city.output, region=REGION),
-
-
-#: What a job of the ablation reads of its settings (the drives: those of the config when not named).
-ABLATION_RUN = {"localizers": EXPERIMENTS["rnn_ablation"]["localizers"], "drives": EXPERIMENTS["rnn_ablation"]["drives"] or DRIVES}
-
-
-def ablation_inputs(wildcards):
-    """The road graph and its stats, and per drive of experiments.rnn_ablation.drives its odometry."""
-    inputs = {"graph": rules.build_graph.output.graph.format(region=wildcards.region),
-              "graph_stats": rules.build_graph.output.stats.format(region=wildcards.region)}
-    for drive in ABLATION_RUN["drives"]:
-        for name in ("poses", "frames"):
-            inputs[f"{name}_{drive}"] = rules.extract_odometry.output[name].format(region=wildcards.region, drive=drive)
-    return inputs
 
 
 rule ablate_rnn:
