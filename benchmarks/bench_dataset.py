@@ -51,7 +51,8 @@ def measure(graph_path: str, path_nodes: int, respect_oneway: bool, max_total: i
 
 
 def child(*args: str) -> dict:
-    out = subprocess.run([sys.executable, "-m", "benchmarks.bench_dataset", "--child", *args], cwd=REPO, capture_output=True, text=True, check=True)
+    out = subprocess.run([sys.executable, "-m", "benchmarks.bench_dataset", "--child", *args],
+                         capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 

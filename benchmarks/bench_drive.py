@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import load
 from topoloc.drive.closed_loop import DLMAgent, GroundTruth, PlaceLocalization, vertex_lane_s
 from topoloc.drive.controller import load_controller
@@ -34,8 +35,6 @@ from topoloc.graph.road_graph import RoadGraph
 from topoloc.place.network import load_model
 from topoloc.place.topometric_map import TopometricMap
 from topoloc.registry import make
-
-from benchmarks.markdown import add_out_option, markdown_copy
 
 TARGET_STEPS_PER_S = 20.0
 

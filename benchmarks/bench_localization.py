@@ -27,67 +27,17 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
-
-from topoloc.config import dotted_overrides, load
-from topoloc.graph.road_graph import RoadGraph
-from topoloc.localization.decoders import beam_decode
-from topoloc.localization.evaluation import DriveTruth, Judge, score_start, start_frames, summarize
-from topoloc.localization.oracle import Oracle, true_path
-from topoloc.localization.rnn import edge_log_probs
-from topoloc.localization.roadmap import Odometry, RoadMap
-from topoloc.motion.poses import read_poses
-from topoloc.registry import make, registry
-from topoloc.trajectory.model import load_model
 
 from benchmarks.markdown import add_out_option, markdown_copy
+from topoloc.config import dotted_overrides, load
+from topoloc.experiments.many_starts import evaluate_kitti
+from topoloc.localization.decoders import beam_decode
+from topoloc.localization.rnn import edge_log_probs
+from topoloc.localization.roadmap import Odometry
+from topoloc.motion.poses import read_poses
+from topoloc.registry import make, registry
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def evaluate_kitti(results: Path, conf: dict, names: list[str], model_path: Path | None = None,
-                   drives: tuple[str, ...] = ("gt", "orbslam2")) -> tuple[pd.DataFrame, pd.DataFrame, dict, RoadMap]:
-    """Every localizer of ``names`` from a start every ``localization.evaluate.start_every_m`` of each KITTI drive,
-    beside the oracle: the per-start table, its summary (with ``cpu_s``), the CPU seconds and the road map."""
-    lconf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
-    ev = conf["localization"]["evaluate"]
-    graph = RoadGraph.load(results / "graph" / "graph.graphml")
-    known = registry()
-    model = load_model(str(model_path)) if any(known[n].requires_model for n in names) else None
-    road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], conf["localization"]["decode"]["max_skip_m"], model)
-    oracle = Oracle(graph, road.states, ev["oracle"]["angle_tol_deg"], ev["oracle"]["length_tol"])
-    judge = Judge(graph, ev["node_tolerance_m"])
-    rows, seconds = [], {}
-    for drive in drives:
-        frames = pd.read_csv(results / "odometry" / drive / "frames.csv")
-        truth = DriveTruth.from_frames(frames)
-        odometry = Odometry.from_poses(read_poses(results / "odometry" / drive / "poses.txt"))
-        starts = start_frames(truth.driven, ev["start_every_m"])
-        path = true_path(graph, truth.edge, truth.xy, truth.driven)
-        began = time.process_time()
-        limits = {int(s): oracle.count(path, int(s), ev["confirm_m"]).localized_m for s in starts}
-        seconds[(drive, "oracle")] = time.process_time() - began
-        for start, limit in limits.items():
-            rows.append({"drive": drive, "start": start, "localizer": "oracle", "steps": 1.0, "localized_m": limit,
-                         "accuracy_after": np.nan, "position_error_m": np.nan, "confident_wrong": np.nan,
-                         "oracle_m": limit, "ratio": 1.0 if np.isfinite(limit) else np.nan})
-        for name in names:
-            localizer = make(name)
-            localizer.reset(road, lconf)  # map structures: built once, outside the timing
-            began = time.process_time()
-            runs = localizer.run_starts(odometry, road, lconf, starts)
-            seconds[(drive, name)] = time.process_time() - began
-            for start, observations, track in runs:
-                m = score_start(judge, truth, start, observations.frame, track.state, track.confidence, track.xy,
-                                ev["confirm_m"], ev["sure"])
-                limit = limits[start]
-                ratio = (m["localized_m"] / limit if np.isfinite(m["localized_m"]) else np.inf) if np.isfinite(limit) else np.nan
-                rows.append({"drive": drive, "start": start, "localizer": name, **m, "oracle_m": limit, "ratio": ratio})
-            print(f"{drive} {name}: {len(runs)} starts, {seconds[(drive, name)]:.2f} s CPU", file=sys.stderr, flush=True)
-    table = pd.DataFrame(rows)
-    summary = summarize(table)
-    summary["cpu_s"] = [seconds.get((r.drive, r.localizer), np.nan) for r in summary.itertuples()]
-    return table, summary, seconds, road
 
 
 def main(argv: list[str] | None = None) -> int:

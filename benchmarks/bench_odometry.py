@@ -31,6 +31,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import load
 from topoloc.encoding import encode_segments
 from topoloc.motion.poses import planar_track, read_calib, read_poses
@@ -38,8 +39,6 @@ from topoloc.odometry.evaluate import kitti_errors
 from topoloc.odometry.stereo_vo import relative_motion, run_stereo_vo
 from topoloc.odometry.synthetic import known_path, write_sequence
 from topoloc.segmentation import segment_track
-
-from benchmarks.markdown import add_out_option, markdown_copy
 
 REPO = Path(__file__).resolve().parents[1]
 KITTI00 = REPO.parent / "shared" / "data" / "kitti00"

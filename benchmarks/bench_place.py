@@ -31,10 +31,9 @@ from pathlib import Path
 import pandas as pd
 import torch
 
+from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.place.images import PlaceSet
 from topoloc.place.network import load_model
-
-from benchmarks.markdown import add_out_option, markdown_copy
 
 
 def embedding_speed(model_path: Path, places_path: Path, threads: int, repeats: int, n: int = 1024) -> dict[str, float]:

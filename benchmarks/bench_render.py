@@ -33,6 +33,7 @@ from pathlib import Path  # noqa: E402
 import cv2  # noqa: E402
 import pyrosm  # noqa: E402
 
+from benchmarks.markdown import add_out_option, markdown_copy  # noqa: E402
 from topoloc.config import load  # noqa: E402
 from topoloc.graph.from_osm import build_road_graph  # noqa: E402
 from topoloc.motion.poses import read_poses  # noqa: E402
@@ -42,8 +43,6 @@ from topoloc.render import drives, render_drive  # noqa: E402
 from topoloc.render.conditions import CONDITIONS, get_condition  # noqa: E402
 from topoloc.render.renderer import Renderer  # noqa: E402
 from topoloc.render.rig import StereoRig  # noqa: E402
-
-from benchmarks.markdown import add_out_option, markdown_copy  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 

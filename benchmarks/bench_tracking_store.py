@@ -21,9 +21,8 @@ import time
 import traceback
 from pathlib import Path
 
-from topoloc import tracking
-
 from benchmarks.markdown import add_out_option, markdown_copy
+from topoloc import tracking
 
 
 def _job(args: tuple[str, str, int, int, int]) -> str | None:
