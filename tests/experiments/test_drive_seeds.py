@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from topoloc.experiments.drive_seeds import summarize, table
 
 ROWS = [{"seed": 0, "checks": {"helsinki": 0.6, "kitti00": 0.8},
@@ -32,18 +34,36 @@ def test_summary_from_the_seeds_metrics(tmp_path) -> None:
             "lp_place_loop_success_fog": mean, "lp_place_loop_success_route0": route0,
             "lp_place_loop_success_route1": 1.0}))
         inputs |= {f"train_{seed}": str(tmp_path / f"train{seed}.json"), f"follow_{seed}": str(tmp_path / f"follow{seed}.json")}
-    conf = {"drive_seeds": {"agent": "lp", "seeds": [0, 1]}, "region": "town", "localization": ["place_loop"],
-            "conditions": ["fog"]}
+    conf = {"drive_seeds": {"agent": "lp", "seeds": [0, 1]}, "region": "town", "train_region": "city",
+            "localization": ["place_loop"], "conditions": ["fog"]}
     outputs = {"summary": str(tmp_path / "summary.md"), "routes": str(tmp_path / "routes.md"),
                "json": str(tmp_path / "summary.json")}
     metrics = summarize(conf, inputs, outputs)
     summary = (tmp_path / "summary.md").read_text().splitlines()
     assert summary[0] == "## Route following over training seeds"
-    assert "| seed | check town | place_loop mean | place_loop min | place_loop fog |" in summary
+    assert "demonstrations of city, each checked on unseen routes there and driven alone on the teach route of town" in summary[2]
+    assert "| seed | check city | place_loop mean | place_loop min | place_loop fog |" in summary
     assert "| **mean** | **0.70** | **0.70** | **0.60** | **0.70** |" in summary
     routes = (tmp_path / "routes.md").read_text()
-    assert "| seed | check town | place_loop route0 | place_loop route1 |" in routes
+    assert "| seed | check city | place_loop route0 | place_loop route1 |" in routes
     assert "| **mean** | **0.70** | **0.50** | **1.00** |" in routes
     data = json.loads((tmp_path / "summary.json").read_text())
-    assert data["seeds"] == [0, 1] and data["mean"]["check/town"] == 0.7
+    assert data["seeds"] == [0, 1] and data["mean"]["check/city"] == 0.7
     assert metrics["lp_place_loop_success_mean_mean"] == 0.7
+
+
+def test_controllers_from_another_region_are_checked_here_too(tmp_path) -> None:
+    inputs = {}
+    for seed, home, here in ((0, 0.6, 0.8), (1, 0.7, 0.9)):
+        for name, data in (("train", {"check/success_rate": home}), ("check", {"check/success_rate": here}),
+                           ("follow", {"lp_place_loop_success_mean": 0.5})):
+            (tmp_path / f"{name}{seed}.json").write_text(json.dumps(data))
+            inputs[f"{name}_{seed}"] = str(tmp_path / f"{name}{seed}.json")
+    conf = {"drive_seeds": {"agent": "lp", "seeds": [0, 1]}, "region": "kitti00", "train_region": "helsinki",
+            "localization": ["place_loop"], "conditions": []}
+    outputs = {k: str(tmp_path / f"{k}.out") for k in ("summary", "routes", "json")}
+    summarize(conf, inputs, outputs)
+    summary = (tmp_path / "summary.out").read_text()
+    assert "| seed | check helsinki | check kitti00 | place_loop mean | place_loop min |" in summary
+    assert "| **mean** | **0.65** | **0.85** | **0.50** | **nan** |" in summary
+    assert json.loads((tmp_path / "json.out").read_text())["mean"]["check/kitti00"] == pytest.approx(0.85)

@@ -228,19 +228,46 @@ rule follow_route_seed:
         "../scripts/follow_route.py"
 
 
+rule check_controller_seed:
+    """The closed-loop check of seed {seed}'s controller, trained in another region (drive.controllers_from), on unseen
+    routes of this region."""
+    input:
+        controller=trained_in(config["drive"]["controllers_from"], f"{SEED_DIR}/train/controller.ckpt"),
+        osm=rules.download_osm.output.osm,
+        graph=rules.build_graph.output.graph,
+    output:
+        metrics=f"{SEED_DIR}/check.json",
+    wildcard_constraints:
+        seed=r"[0-9]+",
+    params:
+        conf=controller_conf(SEEDS_AGENT),
+        code=code("topoloc.experiments.drive_seeds"),
+    log:
+        "results/{region}/logs/check_controller_seed_{seed}.log",
+    benchmark:
+        "results/{region}/benchmarks/check_controller_seed_{seed}.tsv"
+    threads: config["drive"]["threads"]
+    script:
+        "../scripts/check_controller_seed.py"
+
+
 rule summarize_drive_seeds:
     """Route following over training seeds: per seed the check and teach and repeat, their mean and spread."""
     input:
         **{f"train_{seed}": trained_in(config["drive"]["controllers_from"], f"{EXPERIMENT}/drive_seeds/{seed}/train/metrics.json")
            for seed in EXPERIMENTS["drive_seeds"]["seeds"]},
         **{f"follow_{seed}": f"{EXPERIMENT}/drive_seeds/{seed}/follow/metrics.json" for seed in EXPERIMENTS["drive_seeds"]["seeds"]},
+        **{f"check_{seed}": f"{EXPERIMENT}/drive_seeds/{seed}/check.json" for seed in EXPERIMENTS["drive_seeds"]["seeds"]
+           if config["drive"]["controllers_from"]},
     output:
         summary=f"{EXPERIMENT}/drive_seeds/summary.md",
         routes=f"{EXPERIMENT}/drive_seeds/routes.md",
         json=f"{EXPERIMENT}/drive_seeds/summary.json",
     params:
         conf={"drive_seeds": EXPERIMENTS["drive_seeds"], "region": REGION,
-              "localization": config["drive"]["follow"]["localization"], "conditions": config["place"]["repeat_conditions"]},
+              "train_region": config["drive"]["controllers_from"] or REGION,
+              "localization": config["drive"]["follow"]["localization"],
+              "conditions": config["place"]["repeat_conditions"]},
         code=code("topoloc.experiments.drive_seeds"),
     log:
         "results/{region}/logs/summarize_drive_seeds.log",
@@ -251,6 +278,7 @@ rule summarize_drive_seeds:
 
 
 rule experiment_drive_seeds:
-    """Target: route following over training seeds."""
+    """Target: route following over training seeds. With drive.controllers_from (another region's controllers, the
+    paper's protocol: config/drive_transfer.yaml) run it in that region first: its seeds' controllers drive here."""
     input:
         expand(rules.summarize_drive_seeds.output, region=REGION),
