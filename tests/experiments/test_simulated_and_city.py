@@ -94,7 +94,8 @@ def test_city_level_job_and_summary(tmp_path):
     summary = {"summary": str(tmp_path / "summary.md"), "json": str(tmp_path / "summary.json")}
     city.summarize({"city": experiments["city"]}, {"metrics_low": outputs["metrics"]}, summary)
     text = (tmp_path / "summary.md").read_text()
-    assert text.startswith("## City-scale maps") and f"{metrics['peak_mb']:.3f} ± 0.000" in text
+    assert text.startswith("## City-scale maps") and f" {metrics['peak_mb']:.3f} |" in text
+    assert "mean ± sd" not in text  # one level: nothing to average
 
 
 def test_city_map_without_a_file_is_one_line_naming_the_key(tmp_path):

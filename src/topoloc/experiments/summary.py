@@ -23,8 +23,8 @@ def mean_and_spread(values: Sequence[float]) -> tuple[float, float]:
 
 
 def spread_rows(jobs: pd.DataFrame, over: str, keys: list[str], figures: list[str]) -> pd.DataFrame:
-    """The rows of ``jobs`` (one per job ``over`` and ``keys``), then per ``keys`` group a row ``over = "mean ± sd"``
-    whose cells are "mean ± sd" of the jobs' figures."""
+    """The rows of ``jobs`` (one per job ``over`` and ``keys``), then per ``keys`` group of several jobs a row
+    ``over = "mean ± sd"`` whose cells are "mean ± sd" of the jobs' finite figures (the value alone when one is)."""
     rows = []
     groups = jobs.groupby(keys, sort=False) if keys else [((), jobs)]
     for key, group in groups:
@@ -32,9 +32,9 @@ def spread_rows(jobs: pd.DataFrame, over: str, keys: list[str], figures: list[st
         for row in group.itertuples(index=False):
             rows.append({**dict(zip(keys, key)), over: getattr(row, over),
                          **{f: _cell(getattr(row, f)) for f in figures}})
-        stats = {f: mean_and_spread(group[f].tolist()) for f in figures}
-        rows.append({**dict(zip(keys, key)), over: f"**mean ± sd** ({len(group)})",
-                     **{f: f"{m:.3f} ± {s:.3f}" for f, (m, s) in stats.items()}})
+        if len(group) > 1:
+            rows.append({**dict(zip(keys, key)), over: f"**mean ± sd** ({len(group)})",
+                         **{f: _spread_cell(group[f].tolist()) for f in figures}})
     return pd.DataFrame(rows)
 
 
@@ -58,6 +58,12 @@ def write_summary(outputs: dict[str, str], title: str, sentence: str, jobs: pd.D
     records = json.loads(jobs.to_json(orient="records"))  # NaN -> null
     write_json(outputs["json"], {"title": title, "over": over, "jobs": records,
                                  "groups": _finite(spread_json(jobs, over, keys, figures))})
+
+
+def _spread_cell(values: Sequence[float]) -> str:
+    finite = [v for v in values if v is not None and np.isfinite(v)]
+    mean, sd = mean_and_spread(finite)
+    return "" if not finite else f"{mean:.3f}" if len(finite) == 1 else f"{mean:.3f} ± {sd:.3f}"
 
 
 def _cell(value: Any) -> str:
