@@ -4,7 +4,7 @@ from __future__ import annotations
 
 EXPERIMENT_RULES = {"localize_simulated", "summarize_simulated", "localize_city", "summarize_city", "ablate_rnn",
                     "ablate_rnn_baseline", "summarize_rnn_ablation", "train_controller_seed", "follow_route_seed",
-                    "summarize_drive_seeds"}
+                    "check_controller_seed", "summarize_drive_seeds"}
 
 
 def _local_maps(workflow) -> str:
