@@ -21,6 +21,7 @@ include: "workflow/rules/trajectory.smk"
 include: "workflow/rules/place.smk"
 include: "workflow/rules/drive.smk"
 include: "workflow/rules/localization.smk"
+include: "workflow/rules/experiments.smk"
 include: "workflow/rules/common_regions.smk"
 include: "workflow/rules/regions.smk"
 

@@ -2,7 +2,7 @@
 
 Usage (after ``snakemake all`` built ``results/<region>/drive/follow``)::
 
-    PYTHONPATH=src python benchmarks/bench_drive.py [--config config/config.yaml] [--steps 300] [--controller CKPT]
+    python -m benchmarks.bench_drive [--config config/config.yaml] [--steps 300] [--controller CKPT]
 
 1. **Speed**: on the evaluation route, one torch thread, the closed loop of Topo-DLM with the configured
    place localizer (render the camera image, embed it and localize on the topometric map, run the controller,
@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import load
 from topoloc.drive.agents import DLMAgent
 from topoloc.drive.camera import image_shape, place_window
@@ -86,32 +87,34 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--localizer", default="place_loop")
     parser.add_argument("--controller", type=Path, help="a Topo-DLM checkpoint (default: the region's own)")
+    add_out_option(parser, "bench_drive")
     args = parser.parse_args()
-    config = load(Path(args.config))
-    conf = {"drive": config["drive"], "place": config["place"], "render": config["render"]}
-    root = Path("results") / config["region"]["name"]
-    rates = speed(conf, root, args.steps, args.localizer, args.controller or root / "drive" / "dlm" / "controller.ckpt")
-    height, width, _ = image_shape(conf)
-    size = f"{width}x{height}"
-    print(f"## Closed-loop steps per second (one thread, {size} images, {args.steps} steps each)")
-    for name, value in rates.items():
-        print(f"- {name}: {value:.1f} steps/s")
-    verdict = "met" if rates["closed loop"] >= TARGET_STEPS_PER_S else "MISSED"
-    print(f"target >= {TARGET_STEPS_PER_S:.0f} closed-loop steps/s: {verdict}")
-    summary_path = root / "drive" / "follow" / "summary.csv"
-    result = {"steps_per_s": rates}
-    if summary_path.is_file():
-        summary = pd.read_csv(summary_path)
-        table = summary.pivot_table(index="agent", columns="condition", values="success_rate", sort=False)
-        table.insert(0, "Mean", table.mean(axis=1))
-        print("\n## Success rate per condition (follow_route)\n")
-        print(table.to_markdown(floatfmt=".2f"))
-        learned = [a for a in table.index if a.startswith("Topo-") and "ground truth" not in a]
-        for agent in learned:
-            ok = table.loc[agent, "Mean"] >= 0.8 and table.loc[agent].drop("Mean").min() >= 0.6
-            print(f"{agent}: target mean >= 0.8 and every condition >= 0.6: {'met' if ok else 'MISSED'}")
-        result["success"] = {a: table.loc[a].to_dict() for a in table.index}
-    print(json.dumps(result, indent=1))
+    with markdown_copy(args.out):
+        config = load(Path(args.config))
+        conf = {"drive": config["drive"], "place": config["place"], "render": config["render"]}
+        root = Path("results") / config["region"]["name"]
+        rates = speed(conf, root, args.steps, args.localizer, args.controller or root / "drive" / "dlm" / "controller.ckpt")
+        height, width, _ = image_shape(conf)
+        size = f"{width}x{height}"
+        print(f"## Closed-loop steps per second (one thread, {size} images, {args.steps} steps each)")
+        for name, value in rates.items():
+            print(f"- {name}: {value:.1f} steps/s")
+        verdict = "met" if rates["closed loop"] >= TARGET_STEPS_PER_S else "MISSED"
+        print(f"target >= {TARGET_STEPS_PER_S:.0f} closed-loop steps/s: {verdict}")
+        summary_path = root / "drive" / "follow" / "summary.csv"
+        result = {"steps_per_s": rates}
+        if summary_path.is_file():
+            summary = pd.read_csv(summary_path)
+            table = summary.pivot_table(index="agent", columns="condition", values="success_rate", sort=False)
+            table.insert(0, "Mean", table.mean(axis=1))
+            print("\n## Success rate per condition (follow_route)\n")
+            print(table.to_markdown(floatfmt=".2f"))
+            learned = [a for a in table.index if a.startswith("Topo-") and "ground truth" not in a]
+            for agent in learned:
+                ok = table.loc[agent, "Mean"] >= 0.8 and table.loc[agent].drop("Mean").min() >= 0.6
+                print(f"{agent}: target mean >= 0.8 and every condition >= 0.6: {'met' if ok else 'MISSED'}")
+            result["success"] = {a: table.loc[a].to_dict() for a in table.index}
+        print(json.dumps(result, indent=1))
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
 Prints a markdown table. Usage::
 
-    python benchmarks/bench_odometry.py [--repeats 10] [--frames 120] [--seg-repeats 5]
+    python -m benchmarks.bench_odometry [--repeats 10] [--frames 120] [--seg-repeats 5]
 
 Rows:
 
@@ -31,6 +31,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import load
 from topoloc.encoding import encode_segments
 from topoloc.motion.poses import planar_track, read_calib, read_poses
@@ -95,40 +96,42 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=10, help="timed repeats of the real-pair stereo VO step")
     parser.add_argument("--frames", type=int, default=120, help="frames of the rendered sequence (at least 60)")
     parser.add_argument("--seg-repeats", type=int, default=5, help="timed repeats of the segmentation")
+    add_out_option(parser, "bench_odometry")
     args = parser.parse_args()
-    if args.frames < 60:
-        parser.error("--frames must be at least 60")
-    load = os.getloadavg()
-    rows: list[tuple[str, str, str]] = []
-    notes: list[str] = []
-    have_kitti = (KITTI00 / "images" / "calib.txt").is_file()
-    if have_kitti:
-        fps = real_pair_fps(args.repeats)
-        rows.append((f"stereo VO, one frame at 1241x376, real KITTI 00 pair 000000 -> 000001 "
-                     f"(`relative_motion`, median of {args.repeats} after 1 warm-up)", f"{fps:.1f} frames/s", ">= 15"))
-    else:
-        notes.append(f"KITTI rows skipped: {KITTI00} not found.")
-    syn = synthetic_vo(args.frames)
-    what = f"rendered {args.frames}-frame 1241x376 sequence ({syn['length_m']:.0f} m, 15 deg right turn and back)"
-    rows.append((f"stereo VO on the {what}, `run_stereo_vo` incl. PNG reading", f"{syn['fps']:.1f} frames/s", ""))
-    rows.append((f"stereo VO end-point error on the {what}", f"{syn['end_pct']:.2f} % of distance", "<= 2 %"))
-    if syn["kitti_subsequences"]:
-        rows.append((f"stereo VO KITTI-style t_err on the {what} ({syn['kitti_subsequences']} sub-sequences of 100 m)",
-                     f"{syn['t_err_pct']:.2f} %, r_err {syn['r_err_deg_per_100m']:.3f} deg/100 m", "<= 2 %"))
-    else:
-        notes.append(f"KITTI-style t_err not computed: the rendered path is {syn['length_m']:.0f} m, shorter than 100 m.")
-    notes.append(f"rendered sequence: {syn['flagged']} flagged frames, rendering took {syn['render_s']:.1f} s (not timed).")
-    if have_kitti:
-        for name in ("gt", "orbslam2"):
-            seconds, frames, tokens = segmentation_seconds(KITTI00 / "poses" / f"00_{name}.txt", args.seg_repeats)
-            rows.append((f"`segment_track` + `encode_segments`, KITTI 00 `00_{name}.txt` ({frames} frames, {tokens} tokens; "
-                         f"median of {args.seg_repeats})", f"{1000 * seconds:.1f} ms", "< 1 s"))
-    print(f"load average at start: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} ({os.cpu_count()} CPUs)\n")
-    print("| what | value | target |\n|---|---:|---|")
-    for what, value, target in rows:
-        print(f"| {what} | {value} | {target} |")
-    for note in notes:
-        print(f"\n{note}")
+    with markdown_copy(args.out):
+        if args.frames < 60:
+            parser.error("--frames must be at least 60")
+        load = os.getloadavg()
+        rows: list[tuple[str, str, str]] = []
+        notes: list[str] = []
+        have_kitti = (KITTI00 / "images" / "calib.txt").is_file()
+        if have_kitti:
+            fps = real_pair_fps(args.repeats)
+            rows.append((f"stereo VO, one frame at 1241x376, real KITTI 00 pair 000000 -> 000001 "
+                         f"(`relative_motion`, median of {args.repeats} after 1 warm-up)", f"{fps:.1f} frames/s", ">= 15"))
+        else:
+            notes.append(f"KITTI rows skipped: {KITTI00} not found.")
+        syn = synthetic_vo(args.frames)
+        what = f"rendered {args.frames}-frame 1241x376 sequence ({syn['length_m']:.0f} m, 15 deg right turn and back)"
+        rows.append((f"stereo VO on the {what}, `run_stereo_vo` incl. PNG reading", f"{syn['fps']:.1f} frames/s", ""))
+        rows.append((f"stereo VO end-point error on the {what}", f"{syn['end_pct']:.2f} % of distance", "<= 2 %"))
+        if syn["kitti_subsequences"]:
+            rows.append((f"stereo VO KITTI-style t_err on the {what} ({syn['kitti_subsequences']} sub-sequences of 100 m)",
+                         f"{syn['t_err_pct']:.2f} %, r_err {syn['r_err_deg_per_100m']:.3f} deg/100 m", "<= 2 %"))
+        else:
+            notes.append(f"KITTI-style t_err not computed: the rendered path is {syn['length_m']:.0f} m, shorter than 100 m.")
+        notes.append(f"rendered sequence: {syn['flagged']} flagged frames, rendering took {syn['render_s']:.1f} s (not timed).")
+        if have_kitti:
+            for name in ("gt", "orbslam2"):
+                seconds, frames, tokens = segmentation_seconds(KITTI00 / "poses" / f"00_{name}.txt", args.seg_repeats)
+                rows.append((f"`segment_track` + `encode_segments`, KITTI 00 `00_{name}.txt` ({frames} frames, {tokens} tokens; "
+                             f"median of {args.seg_repeats})", f"{1000 * seconds:.1f} ms", "< 1 s"))
+        print(f"load average at start: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} ({os.cpu_count()} CPUs)\n")
+        print("| what | value | target |\n|---|---:|---|")
+        for what, value, target in rows:
+            print(f"| {what} | {value} | {target} |")
+        for note in notes:
+            print(f"\n{note}")
 
 
 if __name__ == "__main__":

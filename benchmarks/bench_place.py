@@ -2,7 +2,7 @@
 
 Usage (after ``snakemake all`` built ``results/<region>/teach_repeat``)::
 
-    PYTHONPATH=src python benchmarks/bench_place.py [--region helsinki] [--repeats 5] [--threads 1 2]
+    python -m benchmarks.bench_place [--region helsinki] [--repeats 5] [--threads 1 2]
         [--odometry-seeds 1 2] [--configfile config/config.yaml]
 
 Prints markdown:
@@ -31,6 +31,7 @@ from pathlib import Path
 import pandas as pd
 import torch
 
+from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.place.images import PlaceSet
 from topoloc.place.network import load_model
 
@@ -101,32 +102,34 @@ def main() -> None:
                         help="rerun the localization with these odometry noise seeds (place.seed of config/config.yaml "
                              "is the stage's own)")
     parser.add_argument("--configfile", type=Path, default=Path("config/config.yaml"))
+    add_out_option(parser, "bench_place")
     args = parser.parse_args()
-    root = Path("results") / args.region
-    summary = pd.read_csv(root / "teach_repeat" / "summary.csv")
-    metrics = json.loads((root / "teach_repeat" / "metrics.json").read_text())
-    train = json.loads((root / "retrieval" / "train_metrics.json").read_text())
-    stats = json.loads((root / "places" / "train" / "stats.json").read_text())
-    held_out = sorted(set(summary.condition[summary.held_out]))
-    print(f"## Localization ({args.region}): within 5 m / within 2 m / relocalizations\n")
-    print(localization_table(summary, held_out))
-    within = summary.pivot(index="condition", columns="method", values="within_5m")
-    ahead = {loop: bool((within[f"siamese network{loop}"] >= within[f"raw correlation{loop}"]).all()
-                        and within[f"siamese network{loop}"].mean() > within[f"raw correlation{loop}"].mean())
-             for loop in ("", " + filter")}
-    print(f"\nnetwork ahead of raw correlation (not behind in any condition, ahead on the mean): "
-          f"paper loop {'yes' if ahead[''] else '**no**'}, filter {'yes' if ahead[' + filter'] else '**no**'}; "
-          f"training: {train['steps']:.0f} steps in {train['train_seconds']:.0f} s; "
-          f"training places at least {stats['min_distance_to_route_m']:.0f} m from the evaluation route\n")
-    if args.odometry_seeds:
-        print("## Within 5 m with other odometry noise draws (same network, map and images)\n")
-        print(odometry_seeds(root, args.odometry_seeds, args.configfile) + "\n")
-    print(f"## Embedding speed (target >= 200 images/s); load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs\n")
-    print("| threads | images | size | images/s | images per CPU second |\n|---|---|---|---|---|")
-    for threads in args.threads:
-        r = embedding_speed(root / "retrieval" / "model.ckpt", root / "places" / "repeat" / "places.npz", threads, args.repeats)
-        print(f"| {r['threads']} | {r['images']} | {r['size']} | {r['images_per_s']:.0f} | {r['images_per_cpu_s']:.0f} |")
-    print(f"\nin the localize_repeat stage: {metrics['embed_images_per_s']:.0f} images/s")
+    with markdown_copy(args.out):
+        root = Path("results") / args.region
+        summary = pd.read_csv(root / "teach_repeat" / "summary.csv")
+        metrics = json.loads((root / "teach_repeat" / "metrics.json").read_text())
+        train = json.loads((root / "retrieval" / "train_metrics.json").read_text())
+        stats = json.loads((root / "places" / "train" / "stats.json").read_text())
+        held_out = sorted(set(summary.condition[summary.held_out]))
+        print(f"## Localization ({args.region}): within 5 m / within 2 m / relocalizations\n")
+        print(localization_table(summary, held_out))
+        within = summary.pivot(index="condition", columns="method", values="within_5m")
+        ahead = {loop: bool((within[f"siamese network{loop}"] >= within[f"raw correlation{loop}"]).all()
+                            and within[f"siamese network{loop}"].mean() > within[f"raw correlation{loop}"].mean())
+                 for loop in ("", " + filter")}
+        print(f"\nnetwork ahead of raw correlation (not behind in any condition, ahead on the mean): "
+              f"paper loop {'yes' if ahead[''] else '**no**'}, filter {'yes' if ahead[' + filter'] else '**no**'}; "
+              f"training: {train['steps']:.0f} steps in {train['train_seconds']:.0f} s; "
+              f"training places at least {stats['min_distance_to_route_m']:.0f} m from the evaluation route\n")
+        if args.odometry_seeds:
+            print("## Within 5 m with other odometry noise draws (same network, map and images)\n")
+            print(odometry_seeds(root, args.odometry_seeds, args.configfile) + "\n")
+        print(f"## Embedding speed (target >= 200 images/s); load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs\n")
+        print("| threads | images | size | images/s | images per CPU second |\n|---|---|---|---|---|")
+        for threads in args.threads:
+            r = embedding_speed(root / "retrieval" / "model.ckpt", root / "places" / "repeat" / "places.npz", threads, args.repeats)
+            print(f"| {r['threads']} | {r['images']} | {r['size']} | {r['images_per_s']:.0f} | {r['images_per_cpu_s']:.0f} |")
+        print(f"\nin the localize_repeat stage: {metrics['embed_images_per_s']:.0f} images/s")
 
 
 if __name__ == "__main__":

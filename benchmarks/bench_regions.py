@@ -1,7 +1,7 @@
 """Scaling benchmark of a multi-region run: wall time with 1, 2 and 4 local cores and through a one-node Slurm,
 and the same config once more while another job loads the CPU (its tables must be identical).
 
-    python benchmarks/bench_regions.py [--configfile config/multi_region/two_regions_quick.yaml]
+    python -m benchmarks.bench_regions [--configfile config/multi_region/two_regions_quick.yaml]
         [--runs cores1,cores2,loaded2,cores4,slurm] [--root /tmp/topoloc-bench-regions] [--target all]
 
 Each run is ``snakemake TARGET --configfile CONFIG`` in its own fresh clone of this repository's HEAD (commit
@@ -31,6 +31,8 @@ import time
 from pathlib import Path
 
 import pandas as pd
+
+from benchmarks.markdown import add_out_option, markdown_copy
 
 REPO = Path(__file__).resolve().parents[1]
 #: The tables compared between runs (globs under results/).
@@ -107,45 +109,47 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", default="cores1,cores2,loaded2,cores4,slurm")
     parser.add_argument("--root", default="/tmp/topoloc-bench-regions")
     parser.add_argument("--target", default="all")
+    add_out_option(parser, "bench_regions")
     args = parser.parse_args(argv)
-    if subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO, capture_output=True,
-                      text=True, check=True).stdout.strip():
-        print("bench_regions: the work tree has uncommitted changes; the runs use HEAD without them", file=sys.stderr)
-    root = Path(args.root)
-    root.mkdir(parents=True, exist_ok=True)
-    rows, reference = [], None
-    for label in args.runs.split(","):
-        checkout = clone(root, label)
-        print(f"{label}: running in {checkout}", file=sys.stderr, flush=True)
-        slurm_jobs = None
-        if label == "slurm":
-            wall, slurm_jobs = run_slurm(checkout, args.target, args.configfile)
-        elif label.startswith(("cores", "loaded")):
-            cores = int(label.removeprefix("cores").removeprefix("loaded"))
-            hogs = [multiprocessing.Process(target=busy, daemon=True) for _ in range(cores if label.startswith("loaded") else 0)]
-            for hog in hogs:
-                hog.start()
-            try:
-                wall = snakemake(checkout, args.target, args.configfile, ["--cores", str(cores)], dict(os.environ))
-            finally:
+    with markdown_copy(args.out):
+        if subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO, capture_output=True,
+                          text=True, check=True).stdout.strip():
+            print("bench_regions: the work tree has uncommitted changes; the runs use HEAD without them", file=sys.stderr)
+        root = Path(args.root)
+        root.mkdir(parents=True, exist_ok=True)
+        rows, reference = [], None
+        for label in args.runs.split(","):
+            checkout = clone(root, label)
+            print(f"{label}: running in {checkout}", file=sys.stderr, flush=True)
+            slurm_jobs = None
+            if label == "slurm":
+                wall, slurm_jobs = run_slurm(checkout, args.target, args.configfile)
+            elif label.startswith(("cores", "loaded")):
+                cores = int(label.removeprefix("cores").removeprefix("loaded"))
+                hogs = [multiprocessing.Process(target=busy, daemon=True) for _ in range(cores if label.startswith("loaded") else 0)]
                 for hog in hogs:
-                    hog.kill()
-                    hog.join()
-        else:
-            raise SystemExit(f"bench_regions: run {label!r} is not coresN, loadedN or slurm")
-        jobs = len(list((checkout / "results").glob("*/benchmarks/*.tsv")))
-        found = tables(checkout / "results")
-        reference = reference or (label, found)
-        differ = sorted(k for k in set(found) | set(reference[1]) if reference[1].get(k) != found.get(k))
-        rows.append({"run": label, "wall_s": round(wall, 1), "jobs": jobs,
-                     "slurm_jobs_completed": slurm_jobs if slurm_jobs is not None else "",
-                     f"tables equal to {reference[0]}": f"{len(set(found) | set(reference[1])) - len(differ)}/{len(reference[1])}",
-                     "differing": " ".join(differ)})
-        pd.DataFrame(rows).to_csv(root / "runs.csv", index=False)
-        print(pd.DataFrame(rows).tail(1).to_markdown(index=False), file=sys.stderr, flush=True)
-    print(f"## {args.configfile}: snakemake {args.target}\n")
-    print(pd.DataFrame(rows).to_markdown(index=False))
-    return 0
+                    hog.start()
+                try:
+                    wall = snakemake(checkout, args.target, args.configfile, ["--cores", str(cores)], dict(os.environ))
+                finally:
+                    for hog in hogs:
+                        hog.kill()
+                        hog.join()
+            else:
+                raise SystemExit(f"bench_regions: run {label!r} is not coresN, loadedN or slurm")
+            jobs = len(list((checkout / "results").glob("*/benchmarks/*.tsv")))
+            found = tables(checkout / "results")
+            reference = reference or (label, found)
+            differ = sorted(k for k in set(found) | set(reference[1]) if reference[1].get(k) != found.get(k))
+            rows.append({"run": label, "wall_s": round(wall, 1), "jobs": jobs,
+                         "slurm_jobs_completed": slurm_jobs if slurm_jobs is not None else "",
+                         f"tables equal to {reference[0]}": f"{len(set(found) | set(reference[1])) - len(differ)}/{len(reference[1])}",
+                         "differing": " ".join(differ)})
+            pd.DataFrame(rows).to_csv(root / "runs.csv", index=False)
+            print(pd.DataFrame(rows).tail(1).to_markdown(index=False), file=sys.stderr, flush=True)
+        print(f"## {args.configfile}: snakemake {args.target}\n")
+        print(pd.DataFrame(rows).to_markdown(index=False))
+        return 0
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ invocation (as the jobs of one ``snakemake --cores N`` call do), logs ``--params
 metric steps one call each (as Lightning's logger does) and one artifact, and closes it. The store is the
 default SQLite file under a scratch ``results/`` (or ``MLFLOW_TRACKING_URI`` when set, e.g. the shared server).
 
-    PYTHONPATH=src python benchmarks/bench_tracking_store.py --jobs 32 --parallel 8
+    python -m benchmarks.bench_tracking_store --jobs 32 --parallel 8
 
 Prints one line: jobs, runs recorded, failed jobs (with the first error), the store's journal mode, wall s.
 """
@@ -21,6 +21,7 @@ import time
 import traceback
 from pathlib import Path
 
+from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc import tracking
 
 
@@ -51,27 +52,29 @@ def main() -> None:
     parser.add_argument("--parallel", type=int, default=8)
     parser.add_argument("--params", type=int, default=30)
     parser.add_argument("--metrics", type=int, default=20)
+    add_out_option(parser, "bench_tracking_store")
     args = parser.parse_args()
-    workdir = tempfile.mkdtemp(prefix="bench-tracking-")
-    invocation = tracking.new_invocation_id()
-    started = time.perf_counter()
-    with multiprocessing.get_context("spawn").Pool(args.parallel) as pool:
-        errors = pool.map(_job, [(workdir, invocation, i, args.params, args.metrics) for i in range(args.jobs)])
-    seconds = time.perf_counter() - started
-    os.chdir(workdir)
-    from mlflow import MlflowClient
+    with markdown_copy(args.out):
+        workdir = tempfile.mkdtemp(prefix="bench-tracking-")
+        invocation = tracking.new_invocation_id()
+        started = time.perf_counter()
+        with multiprocessing.get_context("spawn").Pool(args.parallel) as pool:
+            errors = pool.map(_job, [(workdir, invocation, i, args.params, args.metrics) for i in range(args.jobs)])
+        seconds = time.perf_counter() - started
+        os.chdir(workdir)
+        from mlflow import MlflowClient
 
-    client = MlflowClient(tracking.tracking_uri())
-    experiment = client.get_experiment_by_name("bench")
-    runs = client.search_runs([experiment.experiment_id], f"tags.`topoloc.invocation` = '{invocation}'",
-                              max_results=10000) if experiment else []
-    complete = [r for r in runs if "job" in r.data.metrics and len(r.data.params) == args.params]
-    tracking.finish_invocation(invocation, "FINISHED")
-    db = Path(workdir) / "results" / "mlflow.db"
-    journal = sqlite3.connect(db).execute("PRAGMA journal_mode").fetchone()[0] if db.exists() else "server"
-    failed = [e for e in errors if e]
-    print(f"jobs {args.jobs} (parallel {args.parallel}): runs recorded {len(complete)}/{args.jobs}, "
-          f"failed {len(failed)}{' (' + failed[0] + ')' if failed else ''}, journal {journal}, wall {seconds:.1f} s")
+        client = MlflowClient(tracking.tracking_uri())
+        experiment = client.get_experiment_by_name("bench")
+        runs = client.search_runs([experiment.experiment_id], f"tags.`topoloc.invocation` = '{invocation}'",
+                                  max_results=10000) if experiment else []
+        complete = [r for r in runs if "job" in r.data.metrics and len(r.data.params) == args.params]
+        tracking.finish_invocation(invocation, "FINISHED")
+        db = Path(workdir) / "results" / "mlflow.db"
+        journal = sqlite3.connect(db).execute("PRAGMA journal_mode").fetchone()[0] if db.exists() else "server"
+        failed = [e for e in errors if e]
+        print(f"jobs {args.jobs} (parallel {args.parallel}): runs recorded {len(complete)}/{args.jobs}, "
+              f"failed {len(failed)}{' (' + failed[0] + ')' if failed else ''}, journal {journal}, wall {seconds:.1f} s")
 
 
 if __name__ == "__main__":

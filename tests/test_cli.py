@@ -41,7 +41,7 @@ def small_map(tmp_path_factory):
     from test_train import confs
 
     from topoloc.trajectory.generate_dataset import generate
-    from topoloc.trajectory.train_rnn import fit
+    from topoloc.trajectory.fitting import fit
 
     tmp = tmp_path_factory.mktemp("cli")
     graph, edges = irregular_grid()

@@ -27,10 +27,11 @@ RULES = REPO / "workflow" / "rules"
 
 
 def stage_modules() -> dict[str, str]:
-    """Workflow script name -> the stage module it imports ``run`` from."""
+    """Workflow script name -> the stage module it imports ``run`` from (an experiment's aggregate: ``summarize``,
+    its baseline job: ``baseline``)."""
     stages = {}
     for script in sorted(SCRIPTS.glob("*.py")):
-        found = re.search(r"^from (topoloc[\w.]*) import run$", script.read_text(), re.MULTILINE)
+        found = re.search(r"^from (topoloc[\w.]*) import (?:run|summarize|baseline)$", script.read_text(), re.MULTILINE)
         if found:
             stages[script.name] = found.group(1)
     return stages
@@ -83,7 +84,7 @@ def test_every_script_has_a_stage_module() -> None:
 def test_every_rule_digests_its_scripts_stage_module() -> None:
     """Each rule that runs a stage script has one ``code=code("<the module the script imports run from>")``."""
     stages = stage_modules()
-    checked = 0
+    checked = set()
     for smk in RULES.glob("*.smk"):
         for block in re.split(r"(?m)^(?=[ \t]*rule \w+:)", smk.read_text())[1:]:
             rule = block.strip().split(":")[0].removeprefix("rule ")  # rules under an `if` are indented
@@ -91,8 +92,8 @@ def test_every_rule_digests_its_scripts_stage_module() -> None:
             if not script or script.group(1) not in stages:
                 continue
             assert re.findall(r"code=code\(\"([\w.]+)\"\)", block) == [stages[script.group(1)]], rule
-            checked += 1
-    assert checked == len(stages)
+            checked.add(script.group(1))
+    assert checked == set(stages)
 
 
 @pytest.mark.parametrize("stage", STAGES)

@@ -11,7 +11,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def _measure_resources():
-    spec = importlib.util.spec_from_file_location("measure_resources", REPO / "benchmarks" / "measure_resources.py")
+    spec = importlib.util.spec_from_file_location("measure_resources", REPO / "cluster" / "measure_resources.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -20,11 +20,12 @@ def _measure_resources():
 def test_every_rule_has_measured_resources_in_both_profiles():
     rules = set(_measure_resources().workflow_rules()) - {"all"}
     assert {"build_graph", "train_rnn", "train_retrieval", "summarize_regions"} <= rules
+    assert not rules & {"localize_simulated", "ablate_rnn", "experiment_city"}  # experiments: default resources
     for name in ("slurm", "slurm-gpu"):
         profile = yaml.safe_load((REPO / "profiles" / name / "config.yaml").read_text())
         assert profile["executor"] == "slurm"
         resources = profile["set-resources"]
-        assert set(resources) == rules, f"profiles/{name}: rerun benchmarks/measure_resources.py --write"
+        assert set(resources) == rules, f"profiles/{name}: rerun cluster/measure_resources.py --write"
         assert all(res["mem_mb"] >= 512 and res["runtime"] >= 10 for res in resources.values())
         gpus = {rule for rule, res in resources.items() if res.get("gpu")}
         assert gpus == ({"train_rnn", "train_retrieval", "train_controller"} if name == "slurm-gpu" else set())

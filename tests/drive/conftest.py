@@ -17,7 +17,7 @@ from topoloc.drive.drive_route import DriveRoute, build_route
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
 from topoloc.drive.route_planning import plan_route
 from topoloc.drive.simulator import SUCCESS, Simulator, VehicleSpec
-from topoloc.graph.build_graph import build_road_graph
+from topoloc.graph.from_osm import build_road_graph
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.render.rig import StereoRig
 from topoloc.render.scene import Scene, scene_for_path

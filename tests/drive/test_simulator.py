@@ -24,7 +24,7 @@ from topoloc.drive.simulator import (
     VehicleSpec,
 )
 from topoloc.errors import InputError
-from topoloc.graph.build_graph import build_road_graph
+from topoloc.graph.from_osm import build_road_graph
 from topoloc.render.conditions import CONDITIONS
 from topoloc.render.rig import StereoRig
 from topoloc.render.scene import graph_roads

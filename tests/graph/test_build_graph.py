@@ -4,7 +4,8 @@ import pytest
 
 from osm_fixtures import write_cross
 from topoloc.errors import InputError
-from topoloc.graph.build_graph import build_road_graph, graph_stats, utm_crs
+from topoloc.graph.build_graph import graph_stats
+from topoloc.graph.from_osm import build_road_graph, utm_crs
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.osm.reader import DRIVABLE_HIGHWAY_CLASSES
 

@@ -5,7 +5,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import write_osm
-from topoloc.graph.build_graph import build_road_graph
+from topoloc.graph.from_osm import build_road_graph
 
 GRAPH_CLASSES = ["primary", "secondary", "tertiary", "unclassified", "residential", "living_street", "service"]
 

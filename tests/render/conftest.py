@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import make_config, write_osm
-from topoloc.graph.build_graph import build_road_graph
+from topoloc.graph.from_osm import build_road_graph
 
 LON0, LAT0 = 8.39, 48.98
 M_PER_DEG_LAT = 111_200.0

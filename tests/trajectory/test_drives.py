@@ -14,17 +14,17 @@ from topoloc.geometry import bin_centre, straight_token
 from topoloc.localization.roadmap import RoadMap, token_observations
 from topoloc.motion.poses import Odometry
 from topoloc.odometry.simulate import simulate_pattern_drive
-from topoloc.trajectory.dataset import load_features, load_sequences, load_state_targets
-from topoloc.trajectory.drives import noise_level, training_drives
-from topoloc.trajectory.evaluate_rnn import (
+from topoloc.trajectory.accuracy import (
     accuracy_by_distance,
     accuracy_by_position,
     driven_metres,
     prefix_majority,
 )
+from topoloc.trajectory.dataset import load_features, load_sequences, load_state_targets
+from topoloc.trajectory.drives import noise_level, training_drives
+from topoloc.trajectory.fitting import fit
 from topoloc.trajectory.generate_dataset import generate, run
 from topoloc.trajectory.model import TrajectoryRNN, predict
-from topoloc.trajectory.train_rnn import fit
 
 NOISE = {"scale_error": [0.0, 0.02], "distance_noise": [0.0, 0.02], "heading_drift_deg_per_100m": [0.0, 1.0],
          "heading_noise_deg": [0.0, 0.05]}
@@ -124,7 +124,7 @@ def test_feature_model_round_trips_through_mlflow(tmp_path, monkeypatch):
 
     from topoloc.training import LoggedModel, log_model
     from topoloc.trajectory.model import load_model, log_checkpoint
-    from topoloc.trajectory.train_rnn import signature_example
+    from topoloc.trajectory.fitting import signature_example
 
     uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
     monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)

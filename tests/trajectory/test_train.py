@@ -9,10 +9,10 @@ from trajectory_helpers import random_graph
 
 from tests.conftest import make_config
 from topoloc.trajectory.dataset import load_sequences
-from topoloc.trajectory.evaluate_rnn import accuracy_by_position, prefix_majority
+from topoloc.trajectory.accuracy import accuracy_by_position, prefix_majority
 from topoloc.trajectory.generate_dataset import generate
 from topoloc.trajectory.model import IGNORE, LengthBucketBatches, TrajectoryRNN, pad_batch, predict
-from topoloc.trajectory.train_rnn import build_model, fit
+from topoloc.trajectory.fitting import build_model, fit
 
 
 def confs(**train):

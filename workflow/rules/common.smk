@@ -228,3 +228,35 @@ def drive_conf(drive_keys, place_keys):
 def controller_conf(controller):
     """The config slice of train_controller (:func:`topoloc.drive.config_slices.controller_slice`)."""
     return controller_slice(config, controller)
+
+
+# The experiments (experiments.smk): their config and inputs.
+from topoloc.config import deep_merge
+
+EXPERIMENTS = config["experiments"]
+
+
+def experiment_conf(*keys, **extra):
+    """The config sections ``keys`` and the experiment's settings ``extra``."""
+    return {**{k: config[k] for k in keys}, **extra}
+
+
+def simulated_inputs(wildcards):
+    """The kitti00 map's OSM file when it is one of the maps; a trajectory RNN per map that has one."""
+    exp = EXPERIMENTS["simulated"]
+    inputs = {"kitti00_osm": exp["kitti00_osm"]} if "kitti00" in exp["maps"] else {}
+    return inputs | {f"model_{name}": path for name, path in exp["models"].items() if name in exp["maps"]}
+
+
+#: What a job of the ablation reads of its settings (the drives: those of the config when not named).
+ABLATION_RUN = {"localizers": EXPERIMENTS["rnn_ablation"]["localizers"], "drives": EXPERIMENTS["rnn_ablation"]["drives"] or DRIVES}
+
+
+def ablation_inputs(wildcards):
+    """The road graph and its stats, and per drive of experiments.rnn_ablation.drives its odometry."""
+    inputs = {"graph": rules.build_graph.output.graph.format(region=wildcards.region),
+              "graph_stats": rules.build_graph.output.stats.format(region=wildcards.region)}
+    for drive in ABLATION_RUN["drives"]:
+        for name in ("poses", "frames"):
+            inputs[f"{name}_{drive}"] = rules.extract_odometry.output[name].format(region=wildcards.region, drive=drive)
+    return inputs

@@ -1,12 +1,12 @@
 """Per-rule threads, memory and run time for a scheduler, measured from Snakemake's benchmark files.
 
 Reads every ``results/<region>/benchmarks/<rule>[_<wildcards>].tsv`` under the given results folders, takes
-the largest figures of each rule over regions and wildcards, adds headroom, and writes them as the
+the largest figures of each rule over regions and wildcards (not the experiments of ``experiments.smk``), adds headroom, and writes them as the
 ``set-threads`` / ``set-resources`` of the cluster profiles (between the ``# measured resources`` markers of
 ``profiles/slurm/config.yaml`` and ``profiles/slurm-gpu/config.yaml``; the GPU profile adds ``gpu: 1`` to the
 training rules)::
 
-    python benchmarks/measure_resources.py ../fresh/results [--write]
+    python cluster/measure_resources.py ../fresh/results [--write]
 
 * ``threads``: the mean CPU load of the job (``mean_load``, % of one core), rounded up to whole cores (not for
   rules whose ``threads:`` come from the config, e.g. ``place.threads``: the stage uses that many);
@@ -35,10 +35,17 @@ BEGIN, END = "# measured resources: begin", "# measured resources: end"
 UNMEASURED = {"all"}
 
 
+#: Rule files left out: the experiments are long runs off ``rule all``, on the profiles' default resources.
+UNMEASURED_FILES = {"experiments.smk"}
+
+
 def workflow_rules() -> dict[str, bool]:
-    """The rules of ``workflow/rules/*.smk``, each with whether it sets its threads from the config."""
+    """The rules of ``workflow/rules/*.smk`` (but :data:`UNMEASURED_FILES`), each with whether it sets its threads
+    from the config."""
     rules = {}
     for path in sorted((REPO / "workflow" / "rules").glob("*.smk")):
+        if path.name in UNMEASURED_FILES:
+            continue
         blocks = re.split(r"^(?=\s*(?:rule|checkpoint) \w+:)", path.read_text(), flags=re.MULTILINE)
         for text in blocks:
             name = re.match(r"\s*(?:rule|checkpoint) (\w+):", text)
@@ -80,7 +87,7 @@ def resources(rows: list[dict[str, float]], cap_min: float | None) -> tuple[int,
 
 def block(measured: dict[str, tuple[int, dict[str, int]]], extra: dict[str, dict[str, int]]) -> str:
     """The profile lines between the markers."""
-    lines = [BEGIN + " (benchmarks/measure_resources.py; do not edit by hand)", "set-threads:"]
+    lines = [BEGIN + " (cluster/measure_resources.py; do not edit by hand)", "set-threads:"]
     lines += [f"  {rule}: {threads}" for rule, (threads, _) in measured.items() if threads]
     lines.append("set-resources:")
     for rule, (_, res) in measured.items():

@@ -1,0 +1,49 @@
+"""The benchmarks run as ``python -m benchmarks.<name>`` from the repository root without PYTHONPATH, and copy what
+they print to a markdown file."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import topoloc
+from benchmarks.markdown import markdown_copy
+
+REPO = Path(__file__).resolve().parents[1]
+BENCHMARKS = sorted(p.stem for p in (REPO / "benchmarks").glob("bench_*.py"))
+
+
+def test_the_ten_benchmarks_are_there():
+    assert len(BENCHMARKS) == 10 and "bench_odometry" in BENCHMARKS
+
+
+@pytest.mark.parametrize("name", BENCHMARKS)
+def test_a_benchmark_runs_without_pythonpath(name):
+    # Only the library under test on the path (where `pip install -e .` puts it), never the repository root:
+    # `benchmarks` must come from the working directory.
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env |= {"PYTHONPATH": str(Path(topoloc.__file__).parents[1]), "OMP_NUM_THREADS": "1"}
+    assert Path(env["PYTHONPATH"]).resolve() != REPO.resolve()
+    done = subprocess.run([sys.executable, "-m", f"benchmarks.{name}", "--help"], cwd=REPO, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert f"results/benchmarks/{name}.md" in " ".join(done.stdout.split())  # the --out default
+
+
+def test_markdown_copy_writes_what_was_printed(tmp_path, capsys):
+    with markdown_copy(tmp_path / "out" / "bench.md"):
+        print("| a | b |")
+        print("|---|---|")
+    assert capsys.readouterr().out == "| a | b |\n|---|---|\n"
+    assert (tmp_path / "out" / "bench.md").read_text() == "| a | b |\n|---|---|\n"
+
+
+def test_markdown_copy_leaves_no_file_when_the_benchmark_fails(tmp_path):
+    with pytest.raises(RuntimeError), markdown_copy(tmp_path / "bench.md"):
+        print("half")
+        raise RuntimeError("stopped")
+    assert not (tmp_path / "bench.md").exists()
