@@ -1,10 +1,10 @@
 """Per-rule threads, memory and run time for a scheduler, measured from Snakemake's benchmark files.
 
 Reads every ``results/<region>/benchmarks/<rule>[_<wildcards>].tsv`` under the given results folders, takes
-the largest figures of each rule over regions and wildcards (not the experiments of ``experiments.smk``), adds headroom, and writes them as the
-``set-threads`` / ``set-resources`` of the cluster profiles (between the ``# measured resources`` markers of
-``profiles/slurm/config.yaml`` and ``profiles/slurm-gpu/config.yaml``; the GPU profile adds ``gpu: 1`` to the
-training rules)::
+the largest figures of each rule over regions and wildcards (not the experiments of ``experiments.smk``), adds
+headroom, and writes them as the ``set-threads`` / ``set-resources`` of the cluster profiles (between the
+``# measured resources`` markers of ``profiles/slurm/config.yaml`` and ``profiles/slurm-gpu/config.yaml``; the
+GPU profile adds ``gpu: 1`` to the training rules)::
 
     python cluster/measure_resources.py ../fresh/results [--write]
 
@@ -31,10 +31,8 @@ from topoloc.config import load
 REPO = Path(__file__).resolve().parents[1]
 PROFILES = {"slurm": {}, "slurm-gpu": {"train_rnn": {"gpu": 1}, "train_retrieval": {"gpu": 1}, "train_controller": {"gpu": 1}}}
 BEGIN, END = "# measured resources: begin", "# measured resources: end"
-#: Rules that read no benchmark figures: the target rules, and the cross-region summary (a few seconds).
+#: Rules that read no benchmark figures: the target rule.
 UNMEASURED = {"all"}
-
-
 #: Rule files left out: the experiments are long runs off ``rule all``, on the profiles' default resources.
 UNMEASURED_FILES = {"experiments.smk"}
 

@@ -161,7 +161,7 @@ rule summarize_rnn_ablation:
 
 
 rule experiment_rnn_ablation:
-    """Target: the trajectory RNN ablation (the paper's setting: --configfile config/kitti00.yaml)."""
+    """Target: the trajectory RNN ablation (the paper's setting: --configfile config/regions/kitti00.yaml)."""
     input:
         expand(rules.summarize_rnn_ablation.output, region=REGION),
 
@@ -279,6 +279,7 @@ rule summarize_drive_seeds:
 
 rule experiment_drive_seeds:
     """Target: route following over training seeds. With drive.controllers_from (another region's controllers, the
-    paper's protocol: config/drive_transfer.yaml) run it in that region first: its seeds' controllers drive here."""
+    paper's protocol: config/experiments/drive_transfer.yaml) run it in that region first: its seeds' controllers
+    drive here."""
     input:
         expand(rules.summarize_drive_seeds.output, region=REGION),

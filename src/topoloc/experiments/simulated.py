@@ -27,7 +27,6 @@ from topoloc.io import write_json, write_text
 from topoloc.localization.evaluation import DriveTruth, Judge, start_frames
 from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.roadmap import RoadMap
-from topoloc.motion.poses import Odometry
 from topoloc.odometry.simulate import NOISE_LEVELS, simulate_pattern_drive
 from topoloc.registry import make, registry
 from topoloc.trajectory.model import load_model

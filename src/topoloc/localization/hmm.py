@@ -23,7 +23,7 @@ visual self-localization", CVPR 2013), reduced to the token input of the RNN:
 * **Robustness**: ``reset_prob`` of the mass is spread uniformly at every step
   (a lost vehicle can be found again).
 
-:meth:`CellHMM.decode` runs the forward filter (``online``: the edge with
+:meth:`CellHMM.run` runs the forward filter (``online``: the edge with
 the largest marginal after each step; ``confidence``: that marginal) and the
 Viterbi path (``path``), vectorised over cells with ``np.bincount`` /
 ``np.maximum.reduceat`` on a fixed sparse transition structure.

@@ -50,8 +50,8 @@ class MetricLocalizer(RoadLocalizer):
 
     def run_starts(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any],
                    starts: np.ndarray) -> list[tuple[int, Observations, Track]]:
-        """All starts at once: one filter per start on the drive's steps (:class:`MetricFilter` with
-        several filters), each started at the first step that ends after its start frame."""
+        """All starts at once: one filter per start on the drive's steps (a :class:`CityFilter` of several
+        filters), each started at the first step that ends after its start frame."""
         self.reset(map, conf)
         steps = odometry_steps(odometry.xy, odometry.yaw, float(conf["localization"]["metric"]["cell_m"]))
         starts = np.asarray(starts, np.int64)
