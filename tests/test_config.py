@@ -89,21 +89,6 @@ def test_load_names_the_file(tmp_path):
         load(bad)
 
 
-def test_load_layered_merges_config_files_in_order_and_names_a_bad_one(tmp_path):
-    from topoloc.config import load_layered
-    from topoloc.errors import InputError
-
-    a, b = tmp_path / "a.yaml", tmp_path / "b.yaml"
-    a.write_text("drive:\n  follow: {routes: 4, repeats: 10}\n")
-    b.write_text("drive:\n  follow: {routes: 2}\n")
-    conf = load_layered(REPO / "config" / "config.yaml", [a, b])
-    assert conf["drive"]["follow"]["routes"] == 2 and conf["drive"]["follow"]["repeats"] == 10
-    assert load_layered(REPO / "config" / "config.yaml", [b, a])["drive"]["follow"]["routes"] == 4
-    b.write_text("- a list\n")
-    with pytest.raises(InputError, match=rf"^{b}: a config file is a YAML mapping"):
-        load_layered(REPO / "config" / "config.yaml", [a, b])
-
-
 @pytest.mark.parametrize(
     ("odometry", "expected"),
     [

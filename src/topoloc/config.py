@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import copy
 import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -101,15 +101,6 @@ def load(path: str | Path | None = None, overrides: Mapping[str, Any] | None = N
     data = deep_merge(data, overrides or {})
     data.setdefault("region", {"name": "default"})
     return validate_and_fill(data, path)
-
-
-def load_layered(path: str | Path, layers: Sequence[str | Path] = ()) -> dict[str, Any]:
-    """The config of ``path`` with the YAML files ``layers`` merged over it in order, later ones winning (as
-    ``snakemake --configfile A B`` layers them); InputError naming the file that cannot be read."""
-    overrides: dict[str, Any] = {}
-    for layer in layers:
-        overrides = deep_merge(overrides, _yaml_mapping(Path(layer), str(layer), "the config file"))
-    return load(path, overrides)
 
 
 def region_configs(config: Mapping[str, Any], base_dir: str | Path = ".") -> dict[str, dict[str, Any]]:
