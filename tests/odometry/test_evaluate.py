@@ -15,7 +15,7 @@ def test_scale_error_on_straight_line():
     result = evaluate(straight(1001, 1.0), straight(1001, 1.03))
     assert result["t_err_pct"] == pytest.approx(3.0, rel=1e-6)
     assert result["r_err_deg_per_100m"] == pytest.approx(0.0, abs=1e-6)
-    assert result["kitti_subsequences"] > 0
+    assert result["kitti_subsequences"] == 448  # sum over lengths L = 100..800 of the starts 0, 10, .., 1000 - L
 
 
 def test_heading_drift_gives_rotational_error():

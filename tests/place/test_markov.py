@@ -41,7 +41,8 @@ def test_follows_the_drive_and_ignores_a_single_false_peak():
     scores[30, 45] = 1.0  # frame 30 looks most like a place 15 m ahead
     trace = markov_localize(VERTEX_S, np.ones(60), scores, settings())
     assert list(trace.vertex) == list(truth)
-    assert set(trace.event) == {"filter"} and np.all((trace.score > 0) & (trace.score <= 1))
+    assert set(trace.event) == {"filter"}
+    assert trace.score.min() > 0.5 and trace.score[30] < trace.score[29] - 0.1  # sure throughout; the false peak costs
 
 
 def test_finds_a_vehicle_that_started_elsewhere():
