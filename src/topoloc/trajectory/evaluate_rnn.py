@@ -22,6 +22,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from topoloc.io import atomic_path, write_json, write_text  # noqa: E402
+from topoloc.report_tables import markdown_table  # noqa: E402
 from topoloc.trajectory.accuracy import (  # noqa: E402
     accuracy_by_distance,
     accuracy_by_position,
@@ -101,8 +102,8 @@ def plot_accuracy(tables: dict[str, pd.DataFrame], path: str, title: str, min_fr
     plt.close(fig)
 
 
-def markdown_table(tables: dict[str, pd.DataFrame], region: str) -> str:
-    """Accuracy per position, one column pair per split."""
+def accuracy_markdown(tables: dict[str, pd.DataFrame], region: str) -> str:
+    """The report of the accuracy per position: its heading and one table, with the columns of every split."""
     merged = None
     for name, table in tables.items():
         part = table.rename(columns={"n": f"n {name}", "accuracy": f"accuracy {name}", "ceiling": f"ceiling {name}"})
@@ -112,7 +113,7 @@ def markdown_table(tables: dict[str, pd.DataFrame], region: str) -> str:
     if any("ceiling" in table for table in tables.values()):
         lines += ["ceiling: the best any causal model can score (the most frequent edge among all dataset",
                   "trajectories with the same tokens so far).", ""]
-    lines += ["| " + " | ".join(merged.columns) + " |", "|" + "---|" * len(merged.columns)]
+    rows = []
     for _, row in merged.iterrows():
         cells = []
         for col in merged.columns:
@@ -123,8 +124,8 @@ def markdown_table(tables: dict[str, pd.DataFrame], region: str) -> str:
                 cells.append("" if pd.isna(value) else str(int(value)))
             else:
                 cells.append(f"**{value}**" if value == "last" else str(value))
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        rows.append(cells)
+    return "\n".join([*lines, markdown_table(list(merged.columns), rows)]) + "\n"
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
@@ -150,7 +151,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     frame = frame[["split", *(c for c in frame.columns if c != "split")]]
     with atomic_path(outputs["csv"]) as tmp:
         frame.to_csv(tmp, index=False)
-    text = markdown_table(tables, region)
+    text = accuracy_markdown(tables, region)
     if distances:
         merged = distances["train"].merge(distances["held-out"], on="metres", how="outer", suffixes=(" train", " held-out"))
         text += f"\n# Accuracy against metres driven ({region})\n\n" + merged.to_markdown(index=False, floatfmt=".4f") + "\n"
