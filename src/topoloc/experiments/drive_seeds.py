@@ -26,6 +26,7 @@ from topoloc.drive.routes import make_simulator, random_drive_route, teach_route
 from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import write_json, write_text
+from topoloc.report_tables import markdown_table
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
@@ -49,17 +50,16 @@ def table(rows: list[dict[str, Any]], agent: str, localizations: list[str], colu
     ``route<k>``); then the mean and the sample standard deviation over the seeds."""
     checks = list(rows[0]["checks"]) if rows else []
     head = ["seed", *[f"check {name}" for name in checks]] + [f"{loc} {c}" for loc in localizations for c in columns]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    values = []
+    values, cells = [], []
     for row in rows:
         v = [row["checks"].get(name, np.nan) for name in checks]
         v += [row["follow"].get(f"{agent}_{loc}_success_{c}", np.nan) for loc in localizations for c in columns]
         values.append(v)
-        lines.append(f"| {row['seed']} | " + " | ".join(f"{x:.2f}" for x in v) + " |")
-    lines.append("| **mean** | " + " | ".join(f"**{x:.2f}**" for x in np.nanmean(values, axis=0)) + " |")
+        cells.append([str(row["seed"]), *(f"{x:.2f}" for x in v)])
+    cells.append(["**mean**", *(f"**{x:.2f}**" for x in np.nanmean(values, axis=0))])
     if len(values) > 1:
-        lines.append("| sd | " + " | ".join(f"{x:.2f}" for x in np.nanstd(values, axis=0, ddof=1)) + " |")
-    return "\n".join(lines)
+        cells.append(["sd", *(f"{x:.2f}" for x in np.nanstd(values, axis=0, ddof=1))])
+    return markdown_table(head, cells)
 
 
 def seed_rows(conf: dict[str, Any], inputs: dict[str, str]) -> list[dict[str, Any]]:
