@@ -29,12 +29,6 @@ def schema() -> dict[str, Any]:
     return yaml.safe_load(SCHEMA_PATH.read_text())
 
 
-def validation_message(error: Any) -> str:
-    """One line naming the config key of a jsonschema ``ValidationError`` and what is wrong."""
-    where, message = _where_and_what(error)
-    return f"{where}: {message}"
-
-
 def _where_and_what(error: Any) -> tuple[str, str]:
     path = ".".join(str(part) for part in error.absolute_path)
     message = " ".join(str(error.message).split())

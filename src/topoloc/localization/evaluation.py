@@ -27,10 +27,6 @@ from numpy.typing import NDArray
 
 from topoloc.graph.road_graph import RoadGraph
 
-#: Columns of the per-start table, after ``drive``, ``start``, ``start_m``, ``localizer``.
-START_COLUMNS = ["steps", "length_m", "localized_m", "accuracy_after", "position_error_m", "confident_wrong", "oracle_m",
-                 "ratio"]
-
 
 @dataclass(frozen=True)
 class DriveTruth:

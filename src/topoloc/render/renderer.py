@@ -12,8 +12,6 @@ rain of an image depend only on (seed, frame, camera).
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 import cv2
 import numpy as np
 from numpy.typing import NDArray
@@ -196,13 +194,3 @@ class Renderer:
     def stereo_pair(self, xy: NDArray[np.float64], yaw: float, frame: int = 0) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
         """Left and right BGR images of the rig whose left camera is at ``xy`` (optical axis ``yaw``)."""
         return self.render(xy, yaw, frame, 0), self.render(self.right_camera(xy, yaw), yaw, frame, 1)
-
-
-def render_sequence(renderer: Renderer, xy: NDArray[np.float64], yaw: NDArray[np.float64],
-                    gray: bool = True) -> Iterator[tuple[NDArray[np.uint8], NDArray[np.uint8]]]:
-    """Stereo pairs along poses (map ``xy`` (n, 2), ``yaw`` (n,)); grey like KITTI's image_0 / image_1 when ``gray``."""
-    for frame, (p, a) in enumerate(zip(np.asarray(xy, float), np.asarray(yaw, float))):
-        left, right = renderer.stereo_pair(p, float(a), frame)
-        if gray:
-            left, right = cv2.cvtColor(left, cv2.COLOR_BGR2GRAY), cv2.cvtColor(right, cv2.COLOR_BGR2GRAY)
-        yield left, right

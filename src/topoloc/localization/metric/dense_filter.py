@@ -341,12 +341,6 @@ class MetricFilter:
         """The answer of filter ``which``."""
         return self.answers()[which]
 
-    def scale_belief(self, which: int = 0) -> NDArray[np.float64]:
-        """Filter ``which``'s probability of each scale class (:attr:`MetricModel.scales`), on the map."""
-        mine = self.group // self.classes == which
-        belief = np.bincount(self.group[mine] % self.classes, weights=self.weight[mine], minlength=self.classes)
-        return belief / belief.sum() if belief.sum() > 0 else belief
-
     def path(self, which: int = 0) -> NDArray[np.int64]:
         """A consistent cell sequence of filter ``which``, traced back from its last step's most probable cell.
 
