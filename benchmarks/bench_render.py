@@ -37,17 +37,19 @@ from benchmarks.markdown import add_out_option, markdown_copy  # noqa: E402
 from topoloc.config import load  # noqa: E402
 from topoloc.graph.from_osm import build_road_graph  # noqa: E402
 from topoloc.motion.poses import read_poses  # noqa: E402
+from topoloc.motion.route import CameraPath  # noqa: E402
 from topoloc.odometry.evaluate import evaluate  # noqa: E402
 from topoloc.odometry.stereo_vo import run_stereo_vo  # noqa: E402
 from topoloc.render import drives, render_drive  # noqa: E402
 from topoloc.render.conditions import CONDITIONS, get_condition  # noqa: E402
 from topoloc.render.renderer import Renderer  # noqa: E402
 from topoloc.render.rig import StereoRig  # noqa: E402
+from topoloc.render.scene import Scene  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 
 
-def speed(scene, path, size: tuple[int, int], condition: str, pairs: int, seed: int, conf: dict) -> dict[str, float]:
+def speed(scene: Scene, path: CameraPath, size: tuple[int, int], condition: str, pairs: int, seed: int, conf: dict) -> dict[str, float]:
     """Pairs per wall second, per CPU second, and per wall second with PNG writing."""
     rig = StereoRig.kitti(*size, float(conf["baseline_m"]), float(conf["camera_height_m"]))
     renderer = Renderer(scene, rig, get_condition(condition), seed, float(conf["view_distance_m"]))

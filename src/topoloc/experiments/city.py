@@ -29,6 +29,7 @@ from topoloc.localization.belief_plot import BeliefSnapshot, near_mass, plot_bel
 from topoloc.localization.evaluation import DriveTruth, Judge, start_frames
 from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.roadmap import RoadMap
+from topoloc.localizers.metric import MetricLocalizer
 from topoloc.motion.poses import Odometry
 from topoloc.odometry.simulate import NOISE_LEVELS, simulate_pattern_drive
 from topoloc.registry import make
@@ -45,8 +46,9 @@ def peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def live_run(localizer, road: RoadMap, conf: dict, odometry: Odometry, sure: float,
-             moments: list[float] | None, truth: DriveTruth, steps_driven: np.ndarray) -> tuple[dict, list[BeliefSnapshot]]:
+def live_run(localizer: MetricLocalizer, road: RoadMap, conf: dict[str, Any], odometry: Odometry, sure: float,
+             moments: list[float] | None, truth: DriveTruth,
+             steps_driven: np.ndarray) -> tuple[dict[str, float], list[BeliefSnapshot]]:
     """One filter from the first frame, step by step: CPU per step while unsure and after; belief snapshots."""
     observations = localizer.observe(odometry, road, conf)
     localizer.reset(road, conf)

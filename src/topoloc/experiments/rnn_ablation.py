@@ -26,7 +26,7 @@ from topoloc.io import atomic_path, write_json
 from topoloc.trajectory.accuracy import accuracy_by_distance, driven_metres
 from topoloc.trajectory.dataset import load_features, load_sequences
 from topoloc.trajectory.fitting import fit
-from topoloc.trajectory.model import predict
+from topoloc.trajectory.model import TrajectoryRNN, predict
 
 AT_METRES = (200, 500, 1000)
 #: The baseline job's name among the variants.
@@ -41,7 +41,7 @@ def parse_variant(name: str) -> tuple[str, int, bool]:
     return parts[0], int(parts[1]), len(parts) == 2
 
 
-def held_out(model, val_path: Path, feature_dim: int, spacing_m: float) -> dict[str, float]:
+def held_out(model: TrajectoryRNN, val_path: Path, feature_dim: int, spacing_m: float) -> dict[str, float]:
     """Accuracy over every held-out step, and in the 100 m bins that end at 200, 500 and 1000 m driven."""
     tokens, labels = load_sequences(val_path)
     features = load_features(val_path, feature_dim) if feature_dim else None
