@@ -18,6 +18,7 @@ from topoloc.config import deep_merge
 from topoloc.drive import simulate_demonstrations, train_controller
 from topoloc.drive.config_slices import controller_slice
 from topoloc.drive.controller import load_controller
+from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.drive_route import build_route
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.on_policy import DaggerSettings, closed_loop_check, drive_on_policy, offset_ahead
@@ -186,5 +187,7 @@ def test_train_controller_runs_its_dagger_rounds_and_check_on_the_town(town, tmp
     still = controller_slice(deep_merge(town_config(), {"drive": {"dagger": {"rounds": 0}, "check": {"routes": 0}}}), "lp")
     assert not {"dagger", "check", "episode", "lane"} & set(still["drive"])
     metrics = train_controller.run(still, inputs | {"demonstrations": demo_out["demonstrations"]}, outputs)
-    assert metrics["train_steps"] > 0 and not any(k.startswith(("check/", "dagger/")) for k in metrics)
+    demos = Demonstrations.load(demo_out["demonstrations"])
+    assert metrics["train_steps"] == np.sum(demos.route < demos.route.max())  # all but the one validation route
+    assert not any(k.startswith(("check/", "dagger/")) for k in metrics)
     assert "round" not in pd.read_csv(outputs["history"]).columns  # written again, by a fit without DAgger rounds
