@@ -2,7 +2,8 @@
 
 Usage (after ``snakemake all`` built ``results/<region>/drive/follow``)::
 
-    python -m benchmarks.bench_drive [--config config/config.yaml] [--steps 300] [--controller CKPT]
+    python -m benchmarks.bench_drive [--configfile config/config.yaml] [--steps 300] [--localizer place_loop]
+        [--controller CKPT]
 
 1. **Speed**: on the evaluation route, one torch thread, the closed loop of Topo-DLM with the configured
    place localizer (render the camera image, embed it and localize on the topometric map, run the controller,
@@ -83,14 +84,14 @@ def speed(conf: dict, root: Path, steps: int, localizer: str, controller: Path) 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--config", default="config/config.yaml")
+    parser.add_argument("--configfile", default="config/config.yaml")
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--localizer", default="place_loop")
     parser.add_argument("--controller", type=Path, help="a Topo-DLM checkpoint (default: the region's own)")
     add_out_option(parser, "bench_drive")
     args = parser.parse_args()
     with markdown_copy(args.out):
-        config = load(Path(args.config))
+        config = load(Path(args.configfile))
         conf = {"drive": config["drive"], "place": config["place"], "render": config["render"]}
         root = Path("results") / config["region"]["name"]
         rates = speed(conf, root, args.steps, args.localizer, args.controller or root / "drive" / "dlm" / "controller.ckpt")
