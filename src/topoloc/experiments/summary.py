@@ -53,7 +53,7 @@ def spread_json(jobs: pd.DataFrame, over: str, keys: list[str], figures: list[st
 def write_summary(outputs: dict[str, str], title: str, sentence: str, jobs: pd.DataFrame, over: str, keys: list[str],
                   figures: list[str]) -> None:
     """``outputs['summary']`` (markdown) and ``outputs['json']`` of the jobs' figures."""
-    table = spread_rows(jobs, over, keys, figures).to_markdown(index=False)
+    table = spread_rows(jobs, over, keys, figures).to_markdown(index=False, disable_numparse=True)  # cells: .3f text
     write_text(outputs["summary"], f"## {title}\n\n{sentence}\n\n{table}\n")
     records = json.loads(jobs.to_json(orient="records"))  # NaN -> null
     write_json(outputs["json"], {"title": title, "over": over, "jobs": records,
