@@ -16,11 +16,9 @@ from typing import Any
 from mkdocs.structure.files import File, Files
 
 from topoloc.report.config_reference import config_reference
+from topoloc.report.write_results_pages import TASKS  # task (page file name) -> title, in the order of the nav
 
 REPO = Path(__file__).resolve().parents[2]
-#: Task (page file name) -> title, in the order of the nav.
-TASKS = {"localization": "Localization", "trajectory": "Trajectory learning", "odometry": "Odometry",
-         "place": "Place recognition", "route_following": "Route following", "pipeline": "Pipeline"}
 
 
 def results_pages() -> dict[str, list[Path]]:
