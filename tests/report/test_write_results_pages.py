@@ -10,7 +10,7 @@ import pytest
 
 from topoloc.errors import InputError
 from topoloc.report.markdown import blocks, demote, refresh, tables
-from topoloc.report.write_results_pages import TASKS, run
+from topoloc.report.write_results_pages import TASKS, _worst, run
 
 LOCALIZATION = """# Localization on tiny
 
@@ -94,11 +94,11 @@ def test_pages_hold_the_headline_the_stage_tables_and_the_reports_found(stage):
     assert localization[0][:3] == ["region", "localizer", "starts"]
     assert localization[1:] == [["tiny", "oracle (uniqueness limit of the map)", "4", "50.0 %", "200", "1", "", ""],
                                 ["tiny", "metric filter", "4", "75.0 %", "150", "0.80", "0.990", "2.10"]]
-    assert tables(headline["trajectory"])[0][1][1] == ["tiny", "16", "0.812", "0.500", "-", "42"]
-    assert tables(headline["odometry"])[0][1][1:] == [["tiny", "d1", "rendered", "0.99", "0.43", "0.227", "0.80", "100.0%"],
+    assert tables(headline["trajectory"])[0][1][1] == ["tiny", "16", "-", "0.500", "-", "-", "42"]
+    assert tables(headline["odometry"])[0][1][1:] == [["tiny", "d1", "rendered", "0.99", "0.43", "0.227", "0.80", "100.0 %"],
                                                       ["tiny", "d2", "kitti_poses", "0.50", "-", "-", "-", "-"]]
-    assert tables(headline["place"])[0][1][1:] == [["tiny", "siamese network + filter", "0.750", "0.50 (fog (held out))"],
-                                                   ["tiny", "odometry only", "0.250", "0.00 (overcast)"]]
+    assert tables(headline["place"])[0][1][1:] == [["tiny", "siamese network + filter", "0.750", "fog (held out): 0.500"],
+                                                   ["tiny", "odometry only", "0.250", "overcast: 0.000"]]
     assert tables(headline["route_following"])[0][1][1][:3] == ["tiny", "Topo-LP (place_loop)", "0.750"]
     assert tables(headline["pipeline"])[0][1][1] == ["tiny", "497", "31.6", "2", "3.9", "1800"]
 
@@ -136,3 +136,9 @@ def test_the_readme_tables_are_refreshed_from_every_region(stage, tmp_path):
 
 def test_demote_moves_every_heading_down():
     assert demote("# a\n## b\nnot # c\n", 2) == "### a\n#### b\nnot # c\n"
+
+
+def test_the_worst_condition_is_the_first_of_equal_values():
+    head = ["agent (localization)", "Mean", "overcast", "fog (held out)", "night"]
+    assert _worst(["replay", "0.33", "0.00", "1.00", "0.00"], head) == "overcast: 0.00"
+    assert _worst(["replay", "-", "-", "-", "-"], head) == "-"

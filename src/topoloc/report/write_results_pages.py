@@ -48,6 +48,11 @@ def _num(value: Any, fmt: str) -> str:
     return format(value, fmt)
 
 
+def _percent(share: float | None) -> str:
+    """A share as a percentage (``0.9`` -> ``90.0 %``), or "-"."""
+    return "-" if share is None else f"{100 * share:.1f} %"
+
+
 def _columns(rows: list[Row], names: Sequence[str], where: str) -> list[int]:
     """Indices of the columns ``names`` in the header of ``rows``."""
     head = rows[0]
@@ -58,9 +63,12 @@ def _columns(rows: list[Row], names: Sequence[str], where: str) -> list[int]:
 
 
 def _worst(row: Row, head: Row) -> str:
-    """The lowest per-condition cell of a paper-style row (columns after Mean), with its condition."""
-    pairs = [(float(v), c) for v, c in zip(row[2:], head[2:], strict=True) if v not in ("", "-")]
-    return f"{min(pairs)[0]:.2f} ({min(pairs)[1]})" if pairs else "-"
+    """The lowest per-condition cell of a paper-style row (the columns after Mean) as ``condition: cell``."""
+    pairs = [(float(v), i) for i, v in enumerate(row[2:], start=2) if v not in ("", "-")]
+    if not pairs:
+        return "-"
+    _, i = min(pairs)  # the first of equal values
+    return f"{head[i]}: {row[i]}"
 
 
 def localization_headline(region: str, text: str, where: str) -> list[Row]:
@@ -72,11 +80,11 @@ def localization_headline(region: str, text: str, where: str) -> list[Row]:
 
 
 def trajectory_headline(region: str, metrics: dict[str, float]) -> list[Row]:
-    """The trajectory RNN alone on held-out drives (evaluate_rnn's metrics)."""
-    return [["region", "held-out trajectories", "acc. last token", "acc. at 500 m", "acc. at 1000 m", "training (s)"],
-            [region, _num(metrics.get("heldout_trajectories"), ".0f"), _num(metrics.get("heldout_acc_last"), ".3f"),
-             _num(metrics.get("heldout_acc_500m"), ".3f"), _num(metrics.get("heldout_acc_1000m"), ".3f"),
-             _num(metrics.get("train_seconds"), ".0f")]]
+    """The trajectory RNN alone on held-out drives, by distance driven (evaluate_rnn's metrics)."""
+    metres = (200, 500, 1000, 2000)
+    return [["region", "held-out trajectories", *(f"acc. at {m} m" for m in metres), "training (s)"],
+            [region, _num(metrics.get("heldout_trajectories"), ".0f"),
+             *(_num(metrics.get(f"heldout_acc_{m}m"), ".3f") for m in metres), _num(metrics.get("train_seconds"), ".0f")]]
 
 
 def odometry_headline(region: str, drives: dict[str, dict[str, Any]]) -> list[Row]:
@@ -86,7 +94,7 @@ def odometry_headline(region: str, drives: dict[str, dict[str, Any]]) -> list[Ro
         ev, labels = stats.get("evaluation") or {}, stats.get("labels") or {}
         rows.append([region, drive, str(stats.get("source", "-")), _num(stats.get("length_m", math.nan) / 1000, ".2f"),
                      _num(ev.get("t_err_pct"), ".2f"), _num(ev.get("r_err_deg_per_100m"), ".3f"), _num(ev.get("ate_m"), ".2f"),
-                     _num(labels.get("within_5m"), ".1%")])
+                     _percent(labels.get("within_5m"))])
     return rows
 
 
