@@ -151,7 +151,8 @@ def page(task: str, region: str, headline: list[Row], sources: dict[str, str], b
     lines += ["## Benchmarks and experiments", ""]
     if not reports:
         lines += ["None found when this page was made (`results/benchmarks/*.md`, "
-                  f"`results/{region}/experiments/*/summary.md`). Run them, then `snakemake all -R write_results_pages`.", ""]
+                  f"`results/{region}/experiments/*/summary.md`). Run them (`python -m benchmarks.<name>`, `snakemake experiment_<name>`), then "
+                  "`snakemake all -R write_results_pages`.", ""]
     for path in reports:
         lines += [f"### `{path}` (modified {_modified(path)})", "", demote(path.read_text(), 3).rstrip(), ""]
     return "\n".join(lines)
@@ -198,7 +199,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
                             [f"results/{region}/drive/follow/paths.png", f"results/{region}/drive/follow/success.png",
                              f"results/{region}/drive/follow/strip.png"]),
         "pipeline": (pipeline_headline(region, jobs, _json(inputs, "graph_stats")), {"graph": inputs["graph_stats"]},
-                     "# Jobs of the last run of each rule (`results/" + region + "/benchmarks/*.tsv`)\n\n"
+                     "# Every job with a benchmark file, its last run (`results/" + region + "/benchmarks/*.tsv`)\n\n"
                      + (render(job_table) if len(jobs) else "None found.\n"),
                      [f"results/{region}/graph/map.png", f"results/{region}/report.html"]),
     }
