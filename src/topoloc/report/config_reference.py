@@ -77,6 +77,7 @@ def config_reference(tree: dict[str, Any] | None = None) -> str:
             rows = rows[1:]
         lines += ["| key | type | default | description |", "|---|---|---|---|"]
         for key, child, req in rows:
-            lines.append(f"| `{key}` | {_cell(_type(child))} | {_cell(_default(child, req))} | {_prose(child.get('description', ''))} |")
+            cells = [f"`{key}`", _cell(_type(child)), _cell(_default(child, req)), _prose(child.get("description", ""))]
+            lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
     return "\n".join(lines)
