@@ -22,6 +22,7 @@ include: "workflow/rules/place.smk"
 include: "workflow/rules/drive.smk"
 include: "workflow/rules/localization.smk"
 include: "workflow/rules/experiments.smk"
+include: "workflow/rules/results_pages.smk"
 include: "workflow/rules/common_regions.smk"
 include: "workflow/rules/regions.smk"
 
@@ -31,6 +32,7 @@ rule all:
     input:
         all_outputs(),
         expand(rules.report_html.output, region=REGION),
+        expand(rules.write_results_pages.output, region=REGION),
         region_targets(),
 
 

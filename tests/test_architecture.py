@@ -24,7 +24,7 @@ LAYERS = {
     # 2 sensors: rendered images, odometry
     "render": 2, "odometry": 2,
     # 3 task libraries
-    "localization": 3, "trajectory": 3, "place": 3, "drive": 3,
+    "localization": 3, "trajectory": 3, "place": 3, "drive": 3, "report": 3,
     # 4 localizers (registered implementations of topoloc.localizer) and the registry that discovers them
     "localizers": 4, "registry": 4,
     # the experiments' shared helpers (their stage modules are in the stage layer)
@@ -189,7 +189,7 @@ def describe_cycles(edges: dict[tuple[str, str], list[str]]) -> list[str]:
 def test_the_stages_come_from_the_workflow_scripts():
     stages = stage_modules(REPO / "workflow" / "scripts", "topoloc")
     assert {"graph.build_graph", "odometry.segment_trajectory", "place.localize_repeat", "trajectory.train_rnn"} <= stages
-    assert len(stages) == 22
+    assert len(stages) == 23
 
 
 def test_every_module_has_a_layer():

@@ -260,3 +260,22 @@ def ablation_inputs(wildcards):
         for name in ("poses", "frames"):
             inputs[f"{name}_{drive}"] = rules.extract_odometry.output[name].format(region=wildcards.region, drive=drive)
     return inputs
+
+
+def results_pages_inputs(wildcards):
+    """The region's tables the pages are made of; benchmark reports and experiment summaries are found at run time."""
+    region = wildcards.region
+    inputs = {
+        "graph_stats": rules.build_graph.output.stats.format(region=region),
+        "localization": rules.evaluate_localization.output.table.format(region=region),
+        "evaluation": rules.evaluate_rnn.output.metrics.format(region=region),
+        "accuracy": rules.evaluate_rnn.output.table.format(region=region),
+        "dataset": rules.generate_dataset.output.table.format(region=region),
+        "teach_repeat": rules.localize_repeat.output.table.format(region=region),
+        "follow": rules.follow_route.output.table.format(region=region),
+    }
+    inputs |= {f"odometry_{drive}": rules.extract_odometry.output.stats.format(region=region, drive=drive) for drive in DRIVES}
+    if config["drive"]["controllers_from"] is None:
+        agents = [a for a in config["drive"]["follow"]["agents"] if a in ("dlm", "lp")]
+        inputs |= {f"controller_{a}": f"results/{region}/drive/{a}/metrics.json" for a in agents}
+    return inputs
