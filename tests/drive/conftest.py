@@ -80,17 +80,21 @@ def straight_road(tmp_path_factory) -> dict:
 def straight(straight_road):
     """The drive settings of the straight-road controllers (small network and budget) and the simulator of 260 m of
     the road."""
-    graph = straight_road["graph"]
     drive = drive_conf(train={"batch_size": 32, "batches_per_epoch": 15, "max_epochs": 6, "max_time_min": None,
                               "accelerator": "cpu", "log_model": False, "log_every_n_steps": 5},
                        network={"channels": [16, 24, 32], "hidden": 64, "dropout": 0.1},
                        demonstrations={"val_routes": 1})
+    return drive, road_simulator(straight_road, drive, 260.0)
+
+
+def road_simulator(straight_road: dict, drive: dict, length_m: float) -> Simulator:
+    """The simulator of the first ``length_m`` of the straight road's lane (64 x 48 camera)."""
+    graph = straight_road["graph"]
     edges, froms = plan_route(graph, node_at(graph, 0.0, 60.0), node_at(graph, 400.0, 60.0))
     route = build_route(graph, edges, froms, drive["lane"]["smoothing_m"], drive["lane"]["margin_m"],
-                       min_radius_m=drive["lane"]["min_radius_m"]).cut(260.0)
-    sim = Simulator(route, route_scene(straight_road["osm"], graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
-                    VehicleSpec.from_conf(drive), 100.0)
-    return drive, sim
+                       min_radius_m=drive["lane"]["min_radius_m"]).cut(length_m)
+    return Simulator(route, route_scene(straight_road["osm"], graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
+                     VehicleSpec.from_conf(drive), 100.0)
 
 
 @pytest.fixture(scope="session")

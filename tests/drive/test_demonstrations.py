@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import make_config
-from tests.drive.conftest import drive_conf, node_at, route_scene, town_route
+from tests.drive.conftest import drive_conf, road_simulator, town_route
 from topoloc.drive.controller_training import DemoData
 from topoloc.drive.demonstrations import (
     LOCAL_PATH_M,
@@ -22,24 +22,15 @@ from topoloc.drive.demonstrations import (
     sharp_m,
     training_route,
 )
-from topoloc.drive.drive_route import build_route
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
-from topoloc.drive.route_planning import plan_route
 from topoloc.drive.routes import make_simulator, random_drive_route
-from topoloc.drive.simulator import SUCCESS, Simulator, VehicleSpec
-from topoloc.render.rig import StereoRig
+from topoloc.drive.simulator import SUCCESS
 
 
 @pytest.fixture(scope="module")
 def short_road(straight_road):
-    graph = straight_road["graph"]
     drive = drive_conf()
-    edges, froms = plan_route(graph, node_at(graph, 0.0, 60.0), node_at(graph, 400.0, 60.0))
-    route = build_route(graph, edges, froms, drive["lane"]["smoothing_m"], drive["lane"]["margin_m"],
-                       min_radius_m=drive["lane"]["min_radius_m"]).cut(80.0)
-    sim = Simulator(route, route_scene(straight_road["osm"], graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
-                    VehicleSpec.from_conf(drive), 100.0)
-    return drive, sim
+    return drive, road_simulator(straight_road, drive, 80.0)
 
 
 def test_side_views_label_the_way_back_and_leave_the_drive_alone(short_road):
