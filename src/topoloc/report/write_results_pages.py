@@ -27,11 +27,8 @@ TASKS = {"localization": "Localization", "trajectory": "Trajectory learning", "o
          "place": "Place recognition", "route_following": "Route following", "pipeline": "Pipeline"}
 #: Benchmark script (results/benchmarks/<name>.md) -> task; any other lands on the pipeline page.
 BENCHMARKS = {
-    "bench_localization": "localization", "bench_simulated": "localization", "bench_city": "localization",
-    "trace_truth": "localization", "bench_train": "trajectory", "bench_dataset": "trajectory",
-    "bench_rnn_ablation": "trajectory", "bench_odometry": "odometry", "bench_render": "odometry",
-    "bench_place": "place", "bench_drive": "route_following", "check_failures": "route_following",
-    "offline_steer": "route_following", "drive_seeds": "route_following",
+    "bench_localization": "localization", "bench_train": "trajectory", "bench_dataset": "trajectory",
+    "bench_odometry": "odometry", "bench_render": "odometry", "bench_place": "place", "bench_drive": "route_following",
 }
 #: Experiment (results/{region}/experiments/<name>/summary.md) -> task; any other lands on the pipeline page.
 EXPERIMENTS = {"simulated": "localization", "city": "localization", "rnn_ablation": "trajectory",
