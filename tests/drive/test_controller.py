@@ -98,7 +98,7 @@ def test_pure_pursuit_on_the_recorded_lane_points_is_the_experts_steering(straig
 
 def test_a_waypoint_controller_learns_the_lane_points(straight, straight_demos, tmp_path):
     """Open loop only: at this budget (90 steps) the waypoint controller's lane points carry a bias of about 0.1 m,
-    a steady 0.02-0.06 steer to the left in closed loop that leaves this road (README, route following)."""
+    a steady 0.02-0.06 steer to the left in closed loop that leaves this road (docs/route_following.md)."""
     drive, _ = straight
     conf = drive | {"network": {**drive["network"], "output": {"dlm": "waypoints", "lp": "steer"}}}
     model, _history, metrics = fit(conf, straight_demos, str(tmp_path / "wp.ckpt"))
@@ -224,7 +224,7 @@ def test_a_path_prior_topo_lp_turns_by_its_path_before_it_has_learnt_anything(st
 
 def test_a_path_prior_topo_lp_learns_the_lane_points_from_its_path(straight, straight_demos, tmp_path):
     """Open loop only, as the waypoint Topo-DLM above: at 90 steps the lane points' correction carries a bias that leaves
-    a straight road in closed loop (the paper-sized budgets are measured in the README). The setting survives the
+    a straight road in closed loop (the paper-sized budgets are measured in docs/route_following.md). The setting survives the
     checkpoint."""
     drive, _ = straight
     conf = drive | {"network": {**drive["network"], "output": {"dlm": "steer", "lp": "waypoints"}, "path_prior": True},

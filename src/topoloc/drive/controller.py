@@ -15,7 +15,7 @@
   deviation from the paper, as in the waypoint / affordance variants of conditional imitation learning: each branch
   gives the lane's points :data:`WAYPOINT_ARCS` metres ahead in the vehicle frame, x ahead and y left, and the
   steering is the expert's pure-pursuit law on them, :func:`pure_pursuit`: the network learns where the lane is,
-  not the gain of a controller; measured against ``steer`` in the README).
+  not the gain of a controller; measured against ``steer`` in docs/route_following.md).
 * **Loss**: ``steer_weight (steer - s)^2 + (1 - steer_weight) (v / max_speed - v')^2`` of the commanded branch
   (``v`` the expert's target speed; with ``waypoints`` the steering error is the mean squared error of the points,
   in units of :data:`WAYPOINT_SCALE_M`), plus

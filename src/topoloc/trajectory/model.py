@@ -8,7 +8,7 @@ With ``state_loss_weight`` > 0 a second linear head on the same recurrent
 outputs is trained to predict the rest of the vehicle's position at each step
 (travel direction on the edge, steps since entering it): auxiliary targets
 that make the state the network must track explicit. They cost little
-and generalise to unseen trajectories markedly better (README); the head is
+and generalise to unseen trajectories markedly better (docs/trajectory.md); the head is
 not used for prediction.
 
 Sequences are right-padded with the token ``bins`` (its own embedding row)
