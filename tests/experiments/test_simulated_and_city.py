@@ -56,6 +56,7 @@ def test_simulated_level_job(simulated_levels):
     metrics = json.loads((tmp / "low" / "metrics.json").read_text())
     assert metrics["hmm/starts"] == len(frame)
     assert metrics["hmm/localized_share"] == pytest.approx(targets(frame)["localized_share"])
+    assert 0.0 <= metrics["hmm/ece"] <= 1.0 and metrics["hmm/ece"] == pytest.approx(targets(frame)["ece"])  # every experiment's
     figures = (tmp / "low" / "figures.md").read_text()
     assert "## Per map and noise level" in figures and "## Overall" in figures and "hmm" in figures
     # the medium level's drives are other draws (the level's place in the list seeds them)

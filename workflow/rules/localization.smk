@@ -40,6 +40,12 @@ rule evaluate_localization:
             category="Localization",
             labels={"region": "{region}", "figure": "distance to localized"},
         ),
+        reliability=report(
+            "results/{region}/localization/reliability.png",
+            caption="../report/localization_reliability.rst",
+            category="Localization",
+            labels={"region": "{region}", "figure": "reliability of the confidence"},
+        ),
         **fig9_outputs(),
     params:
         conf={"localization": config["localization"], "drives": DRIVES, "region": config["region"]["name"]},

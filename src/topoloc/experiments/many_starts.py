@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 
 from topoloc.graph.road_graph import RoadGraph
+from topoloc.localization import calibration
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start, start_frames, summarize
 from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.roadmap import RoadMap
@@ -24,7 +25,9 @@ log = logging.getLogger(__name__)
 
 
 def targets(group: pd.DataFrame) -> dict[str, float]:
-    """The issue's figures on one group of starts of one localizer (columns of :func:`start_rows`)."""
+    """The issue's figures on one group of starts of one localizer (columns of :func:`start_rows`); ``ece``: the
+    expected calibration error of all the group's answers (:mod:`topoloc.localization.calibration`), resolved by
+    the oracle or not."""
     resolved = group[np.isfinite(group.oracle_m)]
     unresolved = group[~np.isfinite(group.oracle_m)]
     after = resolved[np.isfinite(resolved.accuracy_after)]
@@ -37,6 +40,7 @@ def targets(group: pd.DataFrame) -> dict[str, float]:
         "confident_wrong_unresolved": float(np.average(unresolved.confident_wrong, weights=unresolved.steps))
         if len(unresolved) and unresolved.steps.sum() else np.nan,
         "confident_wrong_all": float(np.average(group.confident_wrong, weights=group.steps)) if group.steps.sum() else np.nan,
+        "ece": calibration.ece(group) if calibration.COLUMNS[0] in group else np.nan,
     }
 
 

@@ -34,7 +34,7 @@ from topoloc.trajectory.model import load_model
 log = logging.getLogger(__name__)
 
 #: The figures of :func:`topoloc.experiments.many_starts.targets` in the summary.
-FIGURES = ["localized_share", "median_ratio", "accuracy_after", "position_error_m", "confident_wrong_unresolved"]
+FIGURES = ["localized_share", "median_ratio", "accuracy_after", "position_error_m", "confident_wrong_unresolved", "ece"]
 
 
 def grid_osm(path: Path, seed: int = 0, nx: int = 9, ny: int = 7) -> Path:
@@ -143,7 +143,8 @@ def report(frame: pd.DataFrame, seconds: dict[str, float]) -> str:
                   f"- median ratio to the oracle <= 1.3: {t['median_ratio']:.3f}\n"
                   f"- right on >= 97 % of the later steps: {t['accuracy_after']:.3f}\n"
                   f"- confident wrong answers where the oracle does not resolve the start <= 2 %: "
-                  f"{t['confident_wrong_unresolved']:.4f}"]
+                  f"{t['confident_wrong_unresolved']:.4f}\n"
+                  f"- expected calibration error of all answers <= 0.03: {t['ece']:.4f}"]
     return "\n".join(parts) + "\n"
 
 

@@ -7,7 +7,9 @@ error, confident wrong answers, and the oracle's uniqueness limit (:mod:`topoloc
 with the ratio to it. Outputs: ``starts`` (CSV, one row per drive, start and localizer), ``csv``
 (summary per drive and localizer, and over all drives), ``table`` (markdown: the summary beside the
 oracle, then the frame-0 figures), ``metrics`` (JSON), ``cdf`` (distance to localized over all starts,
-every localizer and the oracle) and ``fig9_<drive>`` (the paper's Fig. 9 panels, frame 0).
+every localizer and the oracle), ``reliability`` (the reliability diagram of every localizer's answers over all
+starts and drives, :mod:`topoloc.localization.calibration`) and ``fig9_<drive>`` (the paper's Fig. 9 panels,
+frame 0). Metrics: per localizer its figures over all drives, among them ``<localizer>_ece``.
 """
 
 from __future__ import annotations
@@ -22,10 +24,11 @@ import pandas as pd
 
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json, write_text
+from topoloc.localization import calibration
 from topoloc.localization.connectivity import connected_keys, consecutive_connected, directed_edges
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start, summarize
 from topoloc.localization.oracle import Oracle, true_path
-from topoloc.localization.plot import plot_cdf, plot_fig9
+from topoloc.localization.plot import plot_cdf, plot_fig9, plot_reliability
 from topoloc.registry import registry
 
 log = logging.getLogger(__name__)
@@ -89,10 +92,28 @@ def _fmt(value: float, kind: str = "f") -> str:
     return {"m": f"{value:.0f}", "f": f"{value:.3f}", "i": f"{int(value)}", "x": f"{value:.2f}", "p": f"{100 * value:.1f} %"}[kind]
 
 
-def markdown(summary: pd.DataFrame, first: pd.DataFrame, region: str, ev: dict[str, Any]) -> str:
-    """The localization tables of a config."""
+def reliability_lines(starts: pd.DataFrame) -> list[str]:
+    """The calibration section: per localizer its ECE over all answers and its reliability diagram as a table
+    (share right / answers per confidence bin)."""
+    rows = {name: group for name, group in starts.groupby("localizer", sort=False) if name != ORACLE}
+    bins = calibration.reliability(next(iter(rows.values()))) if rows else pd.DataFrame()
+    head = ["localizer", "ECE", *(f"{lo:.1f}-{hi:.1f}" for lo, hi in zip(bins.get("low", []), bins.get("high", [])))]
+    lines = ["## Calibration", "",
+             "Over every answer of every start and drive: the share right (the judge above) of the answers per "
+             "confidence bin, and their number; ECE = the expected calibration error (the answers' mean gap between "
+             "confidence and share right in their bin; 0 is perfectly calibrated).", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, group in rows.items():
+        table = calibration.reliability(group)
+        cells = [("-" if n == 0 else f"{share:.2f} ({n})") for share, n in zip(table.share_right, table.answers)]
+        lines.append("| " + " | ".join([label(name), _fmt(calibration.ece(group)), *cells]) + " |")
+    return lines
+
+
+def markdown(summary: pd.DataFrame, first: pd.DataFrame, region: str, ev: dict[str, Any], starts: pd.DataFrame | None = None) -> str:
+    """The localization tables of a config (with ``starts``, the per-start rows, also the calibration section)."""
     head = ["drive", "localizer", "starts", "localized", "median (m)", "p90 (m)", "median ratio to oracle",
-            "acc. after", "position error (m)", "confident wrong"]
+            "acc. after", "position error (m)", "confident wrong", "ECE"]
     lines = [f"# Localization on {region}", "",
              f"From a start every {ev['start_every_m']:.0f} m of each drive (nothing before it known). Localized = the "
              f"start of the first stretch of >= {ev['confirm_m']:.0f} m of right answers (the true road, or one meeting it "
@@ -108,7 +129,8 @@ def markdown(summary: pd.DataFrame, first: pd.DataFrame, region: str, ev: dict[s
             f"**{r.drive}**" if r.drive == "all" else str(r.drive), label(r.localizer), _fmt(r.starts, "i"),
             _fmt(r.localized_share, "p"), _fmt(r.median_m, "m"), _fmt(r.p90_m, "m"),
             "1" if is_oracle else _fmt(r.median_ratio, "x"), "" if is_oracle else _fmt(r.accuracy_after),
-            "" if is_oracle else _fmt(r.position_error_m, "x"), "" if is_oracle else _fmt(r.confident_wrong, "p")]) + " |")
+            "" if is_oracle else _fmt(r.position_error_m, "x"), "" if is_oracle else _fmt(r.confident_wrong, "p"),
+            "" if is_oracle else _fmt(r.get("ece", np.nan))]) + " |")
     head0 = ["drive", "localizer", "updates", "km", "step acc. (online)", "step acc. (path)", "consistency",
              "localized after (m)", "oracle (m)", "acc. after", "position error (m)"]
     lines += ["", "## From frame 0", "",
@@ -118,6 +140,8 @@ def markdown(summary: pd.DataFrame, first: pd.DataFrame, region: str, ev: dict[s
         lines.append("| " + " | ".join([str(r.drive), label(r.localizer), _fmt(r.steps, "i"), f"{r.km:.2f}", _fmt(r.accuracy),
                                         _fmt(r.path_accuracy), _fmt(r.consistency), _fmt(r.localized_m, "m"),
                                         _fmt(r.oracle_m, "m"), _fmt(r.accuracy_after), _fmt(r.position_error_m, "x")]) + " |")
+    if starts is not None:
+        lines += ["", *reliability_lines(starts)]
     return "\n".join(lines) + "\n"
 
 
@@ -152,13 +176,16 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         starts.to_csv(tmp, index=False, float_format="%.4f")
     with atomic_path(outputs["csv"]) as tmp:
         summary.to_csv(tmp, index=False, float_format="%.4f")
-    write_text(outputs["table"], markdown(summary, first_table, conf.get("region", ""), ev))
+    write_text(outputs["table"], markdown(summary, first_table, conf.get("region", ""), ev, starts))
+    diagrams = {label(n): calibration.reliability(g) for n, g in starts.groupby("localizer", sort=False) if n != ORACLE}
+    plot_reliability(diagrams, outputs["reliability"],
+                     f"{conf.get('region', '')}: reliability of the answers' confidence, all starts and drives")
     plot_cdf(starts, {n: label(n) for n in starts.localizer.unique()}, outputs["cdf"],
              f"{conf.get('region', '')}: distance driven until localized, {len(starts[starts.localizer == ORACLE])} starts")
     write_json(outputs["metrics"], {"summary": summary.to_dict(orient="records"), "frame0": first_table.to_dict(orient="records")})
     metrics: dict[str, float] = {}
     for _, r in summary[summary.drive == "all"].iterrows():
-        for col in ("localized_share", "median_m", "p90_m", "median_ratio", "accuracy_after", "position_error_m", "confident_wrong"):
+        for col in ("localized_share", "median_m", "p90_m", "median_ratio", "accuracy_after", "position_error_m", "confident_wrong", "ece"):
             if np.isfinite(r[col]):
                 metrics[f"{r.localizer}_{col}"] = float(r[col])
     log.info("localization: %s", metrics)

@@ -13,6 +13,8 @@ scored against the truth of the frames they were given at:
   of the answer's map position to the true position from there on (localizers with a position);
 * ``confident_wrong``: share of all answers from the start that are wrong with a confidence of at
   least ``sure`` (a confident wrong answer is what a user must never see);
+* ``cal_*``: the answers' confidence-bin sums (:mod:`topoloc.localization.calibration`), from which the
+  reliability diagram and the expected calibration error (``ece``) of many starts follow;
 * ``oracle_m``: the uniqueness limit of the map for the same start (:mod:`topoloc.localization.oracle`),
   and ``ratio`` = ``localized_m / oracle_m``.
 """
@@ -26,6 +28,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from topoloc.graph.road_graph import RoadGraph
+from topoloc.localization import calibration
 
 
 @dataclass(frozen=True)
@@ -101,7 +104,7 @@ def score_start(judge: Judge, truth: DriveTruth, start: int, frame: NDArray[np.i
     driven = truth.driven[frame] - truth.driven[start]
     if len(frame) == 0:
         return {"steps": 0.0, "length_m": 0.0, "localized_m": np.nan, "accuracy_after": np.nan,
-                "position_error_m": np.nan, "confident_wrong": 0.0}
+                "position_error_m": np.nan, "confident_wrong": 0.0, **calibration.bin_sums([], [])}
     right = judge.right(state, truth.edge[frame], truth.xy[frame])
     step = localized_step(right, driven, confirm_m)
     out = {"steps": float(len(frame)), "length_m": float(truth.driven[-1] - truth.driven[start]),
@@ -113,12 +116,13 @@ def score_start(judge: Judge, truth: DriveTruth, start: int, frame: NDArray[np.i
         err = np.hypot(*(np.asarray(xy, float)[step:] - truth.xy[frame[step:]]).T)
         if np.isfinite(err).any():
             out["position_error_m"] = float(np.nanmedian(err))
-    return out
+    return out | calibration.bin_sums(confidence, right)
 
 
 def summarize(starts: pd.DataFrame) -> pd.DataFrame:
     """Per drive and localizer (and ``all`` drives): median / p90 distance to localized, share localized,
-    accuracy after (weighted by steps), median position error, confident-wrong share, and the same
+    accuracy after (weighted by steps), median position error, confident-wrong share, the expected calibration
+    error of all answers (``ece``, where the rows carry the bin sums of :func:`score_start`), and the same
     figures of the oracle, with the median ratio on the starts the oracle resolves."""
     rows = []
     for drive in [*starts.drive.unique(), "all"]:
@@ -136,6 +140,7 @@ def summarize(starts: pd.DataFrame) -> pd.DataFrame:
                 "accuracy_after": float(np.average(acc, weights=steps_after)) if steps_after.sum() else np.nan,
                 "position_error_m": float(np.nanmedian(group.position_error_m)) if group.position_error_m.notna().any() else np.nan,
                 "confident_wrong": float(np.average(group.confident_wrong, weights=group.steps)) if group.steps.sum() else 0.0,
+                "ece": calibration.ece(group) if calibration.COLUMNS[0] in group else np.nan,
                 "oracle_resolved": float(np.mean(resolved)),
                 "oracle_median_m": quantile(group.oracle_m.to_numpy(float), 50),
                 "oracle_p90_m": quantile(group.oracle_m.to_numpy(float), 90),

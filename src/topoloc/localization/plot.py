@@ -122,3 +122,29 @@ def plot_cdf(starts: pd.DataFrame, labels: dict[str, str], path: str | Path, tit
     with atomic_path(path) as tmp:
         fig.savefig(tmp)
     plt.close(fig)
+
+
+def plot_reliability(diagrams: dict[str, pd.DataFrame], path: str | Path, title: str) -> None:
+    """Reliability diagrams (:func:`topoloc.localization.calibration.reliability`), one line per localizer: the share
+    of right answers per confidence bin against the bin's mean confidence (the diagonal is perfect calibration),
+    with the number of answers per bin below."""
+    fig, (ax, counts) = plt.subplots(2, 1, figsize=(6.0, 6.5), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    ax.plot([0, 1], [0, 1], color="0.6", lw=1, ls="--", label="perfectly calibrated")
+    width = 0.8 / max(1, len(diagrams)) / len(next(iter(diagrams.values()), [0]))
+    for k, (name, table) in enumerate(diagrams.items()):
+        filled = table[table.answers > 0]
+        line, = ax.plot(filled.confidence, filled.share_right, "o-", ms=4, label=name)
+        centre = (table.low + table.high).to_numpy() / 2 + (k - (len(diagrams) - 1) / 2) * width
+        counts.bar(centre, table.answers, width, color=line.get_color())
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1.02)
+    ax.set_ylabel("share of answers right")
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7, loc="upper left")
+    counts.set_yscale("symlog")
+    counts.set_xlabel("confidence of the answer")
+    counts.set_ylabel("answers")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120)
+    plt.close(fig)

@@ -179,7 +179,8 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     made: dict[str, tuple[list[Row], dict[str, str], str, list[str]]] = {
         "localization": (localization_headline(region, _read(inputs, "localization"), inputs["localization"]),
                          {"table": inputs["localization"]}, _read(inputs, "localization"),
-                         [f"results/{region}/localization/localized_cdf.png", f"results/{region}/localization/fig9_<drive>.png"]),
+                         [f"results/{region}/localization/localized_cdf.png", f"results/{region}/localization/reliability.png",
+                          f"results/{region}/localization/fig9_<drive>.png"]),
         "trajectory": (trajectory_headline(region, _json(inputs, "evaluation")),
                        {"metrics": inputs["evaluation"], "table": inputs["accuracy"], "dataset": inputs["dataset"]},
                        _read(inputs, "dataset") + "\n" + _read(inputs, "accuracy"),
