@@ -72,3 +72,66 @@ def test_the_check_catches_an_old_filter():
                                "trace() is an old name", "reset() is an old name"]
     assert violations(Renamed) == ["step() is an old name", "trace() is an old name", "reset() is an old name"]
     assert not issubclass(Old, Filter)
+
+
+def _ranked_filters():
+    """A started filter of every class with ``top_places``, after a short drive on a small grid (its belief still spread
+    over many roads): (filter, its answer's (road, confidence))."""
+    import sys
+    from pathlib import Path
+
+    import numpy as np
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent / "localization"))
+    from localization_helpers import irregular_grid
+
+    from topoloc.config import load
+    from topoloc.localization.hmm import CellHMM, HmmParams
+    from topoloc.localization.metric.city_filter import CityFilter
+    from topoloc.localization.metric.dense_filter import MetricFilter
+    from topoloc.localization.metric.map_model import MetricModel, MetricSettings
+    from topoloc.localization.roadmap import RoadMap
+
+    graph, _ = irregular_grid()
+    road = RoadMap(graph)
+    conf = load(None)["localization"]
+    model = MetricModel(graph, road.states, MetricSettings.from_conf(conf["metric"]))
+    yaws = np.radians(np.r_[np.zeros(60), np.full(40, 90.0)])  # 120 m east, then 80 m north, in 2 m steps
+    built = {}
+    for cls in (MetricFilter, CityFilter):
+        filt = cls(model, None) if cls is CityFilter else cls(model)
+        filt.start()
+        for yaw in yaws:
+            filt.update(1, float(yaw))
+        est = filt.answer(0)
+        built[cls] = (filt, (est.edge, est.confidence))
+    hmm = CellHMM(graph, road.states, 20, HmmParams.from_conf(conf["hmm"]))
+    hmm.start()
+    for token in (10, 10, 10, 10, 10, 5, 10, 10, 10):
+        hmm.update(token)
+    built[CellHMM] = (hmm, hmm.answer())
+    return built
+
+
+def test_filters_with_top_places_rank_them():
+    """Where a filter has ``top_places`` (:class:`topoloc.localizer.RankedFilter`): at most ``k`` places, most probable
+    first, their probabilities summing to at most 1, the first the filter's own answer when nothing is merged, and
+    merging only adds up."""
+    import numpy as np
+
+    from topoloc.localizer import RankedFilter
+
+    ranked = [cls for cls in filter_classes() if callable(getattr(cls, "top_places", None))]
+    built = _ranked_filters()
+    assert {c.__name__ for c in ranked} >= {"MetricFilter", "CityFilter", "CellHMM"}
+    for cls in ranked:
+        assert issubclass(cls, RankedFilter)
+        assert cls in built, f"{cls.__name__} has top_places: add it to _ranked_filters"
+        filt, (edge, confidence) = built[cls]
+        places = filt.top_places(3, 0.0)
+        probs = np.array([p.probability for p in places])
+        assert len({p.state for p in places}) == 3 and (np.diff(probs) <= 1e-9).all() and probs.sum() <= 1.0 + 1e-5, (cls, places)
+        assert places[0].state == edge and abs(places[0].probability - confidence) < 1e-5, (cls, places, edge, confidence)
+        assert all(p.xy is not None and np.isfinite(p.xy).all() for p in places)
+        merged = filt.top_places(3, 50.0)
+        assert merged[0].probability >= places[0].probability - 1e-9 and len(merged) <= len(places) + 2

@@ -9,9 +9,11 @@
 runs one or more localizers (``--decoder``, comma-separated registry names: ``metric``, the default, needs no
 model; ``hmm`` neither; ``raw``, ``strategy1``, ``strategy2`` need the trajectory model) on the drive and
 writes ``drive.csv`` (per localizer and update: frame, metres driven, the answer's road, confidence, map
-position in the graph's CRS and as lat/lon where the localizer gives one, and the traced-back path) and
+position in the graph's CRS and as lat/lon where the localizer gives one, the traced-back path, and the answer's
+top places ``place<i>_state``, ``_prob``, ``_x``, ``_y``: ``localization.places``) and
 ``drive.geojson`` (the first localizer's run in WGS84: roads of its path, its positions, and the track
-when georeferenced). It prints where the vehicle is at the end and since when the answer is sure. A
+when georeferenced). It prints where the vehicle is at the end and since when the answer is sure, and the top
+places at the end where there are several (a drive two places explain equally names both). A
 georeference (``--gps``, ``--origin``) is optional: it only checks that the drive lies on the map. The
 model is a checkpoint path, an MLflow model URI (``runs:/<id>/model``) or the run id of a ``train_rnn``
 stage. Bad input ends with one line: ``topoloc: <file or option>: <what is wrong>``.
@@ -113,7 +115,8 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
         tables.append(pd.DataFrame({"localizer": name, "step": np.arange(len(track)), "frame": observations.frame,
                                     "driven_m": odometry.driven_m[observations.frame], "edge": track.state,
                                     "confidence": np.round(track.confidence, 5), "x": track.xy[:, 0], "y": track.xy[:, 1],
-                                    "lat": lat, "lon": lon, "path": track.path}))
+                                    "lat": lat, "lon": lon, "path": track.path,
+                                    **track.place_columns(int(conf["localization"]["places"]["top"]))}))
     table = pd.concat(tables, ignore_index=True)
     out = Path(args.out)
     csv_path, geojson_path = out.with_name(out.name + ".csv"), out.with_name(out.name + ".geojson")
@@ -123,12 +126,19 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     write_geojson(geojson_path, graph, first, names[0], track_xy)
     final = first.iloc[-1]
     sure = first.confidence.to_numpy() >= (args.sure if args.sure is not None else conf["localization"]["evaluate"]["sure"])
+    places = []
+    rank = 1
+    while f"place{rank}_state" in first.columns and int(final[f"place{rank}_state"]) >= 0:
+        plon, plat = to_lonlat.transform(float(final[f"place{rank}_x"]), float(final[f"place{rank}_y"]))
+        places.append({"edge": int(final[f"place{rank}_state"]), "probability": float(final[f"place{rank}_prob"]),
+                       "lat": float(plat), "lon": float(plon)})
+        rank += 1
     unsure = np.flatnonzero(~sure)
     since = None if not sure[-1] else float(first.driven_m.iloc[unsure[-1] + 1 if len(unsure) else 0])
     return {"localizer": names[0], "label": known[names[0]].label, "updates": len(first), "edge_now": int(final.edge),
             "name_now": str(graph.edges["name"].iat[int(final.edge)]) if final.edge >= 0 else "",
             "confidence_now": float(final.confidence), "lat": float(final.lat), "lon": float(final.lon),
-            "sure_since_m": since, "seconds": {k: round(v, 4) for k, v in seconds.items()},
+            "sure_since_m": since, "places_now": places, "seconds": {k: round(v, 4) for k, v in seconds.items()},
             "csv": str(csv_path), "geojson": str(geojson_path)}
 
 
@@ -168,6 +178,10 @@ def main(argv: list[str] | None = None) -> int:
             sure = f"sure since {s['sure_since_m']:.0f} m" if s["sure_since_m"] is not None else "not sure yet"
             print(f"topoloc localize: {s['label']}, {s['updates']} updates: {where}, confidence {s['confidence_now']:.2f}, "
                   f"{sure}; wrote {s['csv']} and {s['geojson']}")
+            if len(s["places_now"]) > 1:  # where else it may be: the top places, most probable first
+                print("top places now: " + "; ".join(
+                    f"{i}. road {p['edge']} ({p['probability']:.2f})" + (f" at {p['lat']:.6f}, {p['lon']:.6f}" if np.isfinite(p["lat"]) else "")
+                    for i, p in enumerate(s["places_now"], 1)))
     except InputError as err:
         print(f"topoloc: {err}", file=sys.stderr)
         return 1

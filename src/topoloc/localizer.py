@@ -12,6 +12,12 @@ A localizer answers, one observation at a time, where the vehicle is:
 * :meth:`Localizer.path` returns, after the last update, the consistent sequence of states traced back
   (Viterbi, or the best final hypothesis); localizers without one return their online answers.
 
+An answer also lists its *top places* (:class:`Place`, :attr:`Answer.places`): the most probable states with
+their probabilities and positions, where the localizer's filter ranks them (the optional ``top_places(k)`` of
+:class:`RankedFilter`); places within ``merge_m`` metres of a more probable one are merged into it
+(:func:`merge_places`). The answer is then the top place, and its confidence that place's probability: when two
+places explain the drive about equally (a mirror walk), the answer names both and is at most 0.5 sure.
+
 :func:`run_batch` is the batch form: it feeds a whole sequence of observations and collects a
 :class:`Track`. Subclasses may override :meth:`Localizer.run` with a faster equivalent (the tests check
 that both agree).
@@ -28,6 +34,7 @@ there (plus its schema entry and its test).
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -45,17 +52,66 @@ PLACE_OBSERVATIONS = ("images",)
 
 
 @dataclass(frozen=True)
+class Place:
+    """One of the places a filter ranks: a state (a road on a road map), its probability and its best position."""
+
+    state: int
+    probability: float
+    xy: tuple[float, float] | None = None
+
+
+def merge_places(states: Sequence[int], probability: Sequence[float], xy: NDArray[np.float64] | None, k: int,
+                 merge_m: float = 0.0) -> list[Place]:
+    """The ``k`` most probable places of candidate ``states`` (with their ``probability`` and positions ``xy``
+    ``(n, 2)``, NaN where none): in order of probability, a candidate within ``merge_m`` metres of a place already
+    kept adds its probability to that place (the same place under two states, e.g. two roads at a node);
+    most probable first."""
+    p = np.asarray(probability, float)
+    pos = np.full((len(p), 2), np.nan) if xy is None else np.asarray(xy, float).reshape(-1, 2)
+    kept: list[list] = []  # [state, probability, xy]
+    for i in np.argsort(-p, kind="stable"):
+        if not p[i] > 0:
+            break
+        near = None
+        if merge_m > 0 and np.isfinite(pos[i]).all():
+            near = next((place for place in kept if place[2] is not None
+                         and math.hypot(place[2][0] - pos[i, 0], place[2][1] - pos[i, 1]) <= merge_m), None)
+        if near is not None:
+            near[1] += float(p[i])
+        else:
+            kept.append([int(states[i]), float(p[i]), (float(pos[i, 0]), float(pos[i, 1])) if np.isfinite(pos[i]).all() else None])
+    kept.sort(key=lambda place: -place[1])
+    return [Place(state, probability, xy) for state, probability, xy in kept[:k]]
+
+
+@dataclass(frozen=True)
 class Answer:
     """Where the vehicle is after an update.
 
     ``state``: a road (undirected edge id) on a road map, a vertex on a topometric map; -1 when the
     localizer has no answer. ``xy``: the map position (projected metres) where the localizer has one,
-    else None. ``confidence``: the probability the localizer gives its answer.
+    else None. ``confidence``: the probability the localizer gives its answer. ``places``: the top places,
+    most probable first, where the localizer ranks them (the answer is then the first).
     """
 
     state: int
     confidence: float
     xy: tuple[float, float] | None = None
+    places: tuple[Place, ...] = ()
+
+    @classmethod
+    def of_places(cls, places: Sequence[Place]) -> Answer:
+        """The answer that is the top of ``places`` (no answer when there is none)."""
+        if not places:
+            return cls(-1, 0.0)
+        top = places[0]
+        return cls(top.state, top.probability, top.xy, tuple(places))
+
+    def ranked(self) -> tuple[Place, ...]:
+        """The top places; for a localizer that ranks none, the answer itself as the one place (none without an answer)."""
+        if self.places:
+            return self.places
+        return (Place(self.state, self.confidence, self.xy),) if self.state >= 0 else ()
 
 
 @dataclass
@@ -67,6 +123,7 @@ class Track:
     xy: NDArray[np.float64]  #: (n, 2), NaN where the localizer gives no position
     path: NDArray[np.int64]  #: the consistent sequence traced back after the last update
     extra: dict[str, Any] = field(default_factory=dict)
+    places: list[tuple[Place, ...]] = field(default_factory=list)  #: per update, the top places (:meth:`Answer.ranked`)
 
     def __len__(self) -> int:
         return len(self.state)
@@ -77,7 +134,20 @@ class Track:
         state = np.array([a.state for a in answers], np.int64)
         xy = np.array([a.xy if a.xy is not None else (np.nan, np.nan) for a in answers], float).reshape(-1, 2)
         return cls(state, np.array([a.confidence for a in answers], float), xy,
-                   state.copy() if path is None else np.asarray(path, np.int64), dict(extra))
+                   state.copy() if path is None else np.asarray(path, np.int64), dict(extra), [a.ranked() for a in answers])
+
+    def place_columns(self, k: int) -> dict[str, NDArray]:
+        """The top ``k`` places of every update as columns ``place<i>_state``, ``_prob``, ``_x``, ``_y`` (i = 1..k; -1
+        and NaN where an update has fewer places); empty when the track holds no places."""
+        n = len(self)
+        cols: dict[str, NDArray] = {}
+        for i in range(k):
+            ranked = [p[i] if i < len(p) else None for p in self.places] if len(self.places) == n else [None] * n
+            cols[f"place{i + 1}_state"] = np.array([-1 if p is None else p.state for p in ranked], np.int64)
+            cols[f"place{i + 1}_prob"] = np.array([np.nan if p is None else p.probability for p in ranked], float)
+            for axis, name in enumerate("xy"):
+                cols[f"place{i + 1}_{name}"] = np.array([np.nan if p is None or p.xy is None else p.xy[axis] for p in ranked], float)
+        return cols
 
 
 @runtime_checkable
@@ -100,6 +170,21 @@ class Filter(Protocol):
 
     def answer(self) -> Any:
         """The answer after the last update."""
+
+
+@runtime_checkable
+class RankedFilter(Filter, Protocol):
+    """A :class:`Filter` that also ranks the places its belief holds (optional for a filter; the metric filter,
+    the token HMM and through it ``rnn_filter`` have it).
+
+    ``top_places(k, merge_m)`` returns after the last update the ``k`` most probable places (:class:`Place`: a
+    state, its probability mass and its best position), most probable first, places within ``merge_m``
+    metres merged (:func:`merge_places`); the probabilities sum to at most 1 (the rest lies elsewhere, or off
+    the map).
+    """
+
+    def top_places(self, k: int, merge_m: float = 0.0) -> list[Place]:
+        """The ``k`` most probable places after the last update."""
 
 
 class Localizer(ABC):

@@ -73,12 +73,19 @@ def test_beam_localizers_online_equal_the_batch_decoder(setting, name):
 def test_hmm_localizer_online_equals_the_batch_decode(setting):
     graph, road, conf, tokens = setting
     localizer = make("hmm")
-    localizer.reset(road, conf)
+    unmerged = {**conf, "localization": {**conf["localization"], "places": {"top": 3, "merge_m": 0.0}}}
+    localizer.reset(road, unmerged)
     track = localizer.run(tokens)
     batch = CellHMM(graph, road.states, 20, HmmParams.from_conf(conf["localization"]["hmm"])).run(np.asarray(tokens))
     assert track.state.tolist() == batch.online.tolist() and track.path.tolist() == batch.path.tolist()
     assert np.allclose(track.confidence, batch.confidence)
     assert np.isfinite(track.xy).all()  # the HMM's cells give a position
+    # places within merge_m are one: the answer's confidence is the merged place's mass, never less than its road's
+    localizer.reset(road, conf)
+    merged = localizer.run(tokens)
+    assert (merged.confidence >= batch.confidence - 1e-9).all() and (merged.confidence > batch.confidence + 1e-6).any()
+    assert all(abs(a.confidence - p[0].probability) < 1e-12 and p[0].state == s for a, p, s in
+               zip([localizer.answer()], [merged.places[-1]], [merged.state[-1]]))
 
 
 def test_reset_restarts_and_keeps_the_map_structures(setting):

@@ -7,9 +7,11 @@ is configured, ``model`` (the ``train_rnn`` checkpoint). Each localizer of ``loc
 (:func:`topoloc.localization.evaluation.start_frames`), seeing nothing before it.
 
 Outputs: ``answers`` (CSV, one row per start, localizer and update: the frame, the answer's road,
-confidence and map position, the traced-back path, and the truth of that frame), ``stats`` (JSON:
-CPU seconds per localizer, starts, decoder facts of the frame-0 run) and ``geojson`` (the frame-0 run of
-the first configured localizer that gives positions, else the first one, in WGS84).
+confidence and map position, the traced-back path, and the truth of that frame; then the top places of the
+answer, ``place<i>_state``, ``_prob``, ``_x``, ``_y`` for i = 1 .. ``localization.places.top``: the first is the
+answer itself, -1 / empty where there are fewer), ``stats`` (JSON: CPU seconds per localizer, starts, decoder
+facts of the frame-0 run) and ``geojson`` (the frame-0 run of the first configured localizer that gives
+positions, else the first one, in WGS84, with the top places of its last answer).
 """
 
 from __future__ import annotations
@@ -36,6 +38,11 @@ from topoloc.trajectory.model import load_model
 log = logging.getLogger(__name__)
 
 ANSWER_COLUMNS = ["start", "localizer", "step", "frame", "state", "confidence", "x", "y", "path", "true_edge"]
+
+
+def place_columns(top: int) -> list[str]:
+    """The columns of the top places in ``answers.csv``, after :data:`ANSWER_COLUMNS`."""
+    return [f"place{i}_{what}" for i in range(1, top + 1) for what in ("state", "prob", "x", "y")]
 
 
 def read_frames(path: str) -> pd.DataFrame:
@@ -74,6 +81,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     road = RoadMap(graph, loc["decode"]["u_turns"], loc["decode"]["max_skip_m"], model)
     starts = start_frames(truth.driven, float(loc["evaluate"]["start_every_m"]))
     lconf = road_conf(conf)
+    top = int(loc["places"]["top"])
     tables, stats = [], {"drive": conf.get("drive", ""), "frames": len(frames), "starts": starts.tolist(), "localizers": {}}
     for name in names:
         localizer = make(name)
@@ -85,14 +93,15 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
             tables.append(pd.DataFrame({
                 "start": start, "localizer": name, "step": np.arange(len(track)), "frame": observations.frame,
                 "state": track.state, "confidence": np.round(track.confidence, 5), "x": track.xy[:, 0], "y": track.xy[:, 1],
-                "path": track.path, "true_edge": truth.edge[observations.frame]}))
+                "path": track.path, "true_edge": truth.edge[observations.frame],
+                **{k: np.round(v, 5) if k.endswith("_prob") else v for k, v in track.place_columns(top).items()}}))
         facts = runs[0][2].extra.get("summary", {}) if runs and runs[0][0] == starts[0] else {}  # frame 0's facts
         stats["localizers"][name] = {"cpu_seconds": seconds, "updates": steps,
                                      "ms_per_update": 1000.0 * seconds / max(steps, 1), **facts}
         log.info("%s: %d starts, %d updates, %.2f s CPU", name, len(runs), steps, seconds)
     if not tables:
         raise InputError(inputs["poses"], "empty trajectory: the drive is too short to give any observation")
-    answers = pd.concat(tables, ignore_index=True)[ANSWER_COLUMNS]
+    answers = pd.concat(tables, ignore_index=True)[ANSWER_COLUMNS + place_columns(top)]
     with atomic_path(outputs["answers"]) as tmp:
         answers.to_csv(tmp, index=False, float_format="%.3f")
     first = answers[answers.start == starts[0]]

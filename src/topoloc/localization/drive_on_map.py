@@ -58,12 +58,32 @@ def runs_of(edges: NDArray[np.int64]) -> list[tuple[int, int, int]]:
     return [(int(edges[a]), int(a), int(b)) for a, b in zip(starts, ends)]
 
 
+def place_features(graph: RoadGraph, answers: pd.DataFrame, localizer: str, to_lonlat) -> list[dict]:
+    """Points of the top places of the last answer of ``answers`` (its ``place<i>_*`` columns), most probable first."""
+    if len(answers) == 0:
+        return []
+    last = answers.iloc[-1]
+    out = []
+    rank = 1
+    while f"place{rank}_state" in answers.columns:
+        edge, prob = int(last[f"place{rank}_state"]), float(last[f"place{rank}_prob"])
+        x, y = float(last[f"place{rank}_x"]), float(last[f"place{rank}_y"])
+        if edge >= 0 and np.isfinite([x, y]).all():
+            out.append({"type": "Feature", "geometry": {"type": "Point", "coordinates": np.round(to_lonlat([[x, y]])[0], 7).tolist()},
+                        "properties": {"kind": "place", "localizer": localizer, "rank": rank, "edge_id": edge,
+                                       "probability": round(prob, 4), "frame": int(last["frame"]),
+                                       "name": str(graph.edges["name"].iat[edge])}})
+        rank += 1
+    return out
+
+
 def write_geojson(path: str | Path, graph: RoadGraph, answers: pd.DataFrame, localizer: str,
                   track_xy: NDArray[np.float64] | None = None) -> None:
     """GeoJSON (WGS84) of one localizer's run: one LineString per run of one road along its traced-back
-    ``path`` (with its steps, frames and mean confidence), the answers' positions where it has them, and
-    the track if given. ``answers`` holds that run's rows (columns ``path``, ``confidence``, ``frame``,
-    and optionally ``x``, ``y``)."""
+    ``path`` (with its steps, frames and mean confidence), the answers' positions where it has them, the top
+    places of the last answer (one Point each, ``kind`` ``place``: rank, road, probability; the first is the
+    answer) and the track if given. ``answers`` holds that run's rows (columns ``path``, ``confidence``,
+    ``frame``, and optionally ``x``, ``y`` and the place columns ``place<i>_state``, ``_prob``, ``_x``, ``_y``)."""
     to_lonlat = _to_lonlat(graph)
     features = []
     path_edges = answers["path"].to_numpy(np.int64)
@@ -88,6 +108,7 @@ def write_geojson(path: str | Path, graph: RoadGraph, answers: pd.DataFrame, loc
                                                            "frames": known["frame"].astype(int).tolist(),
                                                            "confidence": np.round(known["confidence"], 4).tolist()},
                          "geometry": {"type": "MultiPoint", "coordinates": lonlat.tolist()}})
+    features += place_features(graph, answers, localizer, to_lonlat)
     if track_xy is not None and len(track_xy) > 1:
         step = max(1, len(track_xy) // 2000)
         features.append({"type": "Feature", "properties": {"kind": "track"},

@@ -45,6 +45,8 @@ from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.connectivity import DirectedEdges
 from topoloc.localization.decoders import Decoded
 from topoloc.localization.metric.cell_grid import CellGrid, Chains
+from topoloc.localization.places import belief_places
+from topoloc.localizer import Place
 
 log = logging.getLogger(__name__)
 
@@ -177,6 +179,12 @@ class CellHMM:
     def answer(self) -> tuple[int, float]:
         """The online answer after the last token (edge, its marginal); (-1, 0) before the first."""
         return self.online
+
+    def top_places(self, k: int, merge_m: float = 0.0) -> list[Place]:
+        """The ``k`` most probable places of the forward belief (:class:`topoloc.localizer.RankedFilter`)."""
+        n = self.num_cells
+        return belief_places(np.zeros(n, np.int64), np.arange(n), self.alpha, self.cell_edge, self.grid.xy, 1,
+                             self.states.num_edges, k, merge_m)[0]
 
     def path(self) -> tuple[NDArray[np.int64], int]:
         """The Viterbi cells of the steps so far, and the number of fresh starts on it."""

@@ -24,6 +24,11 @@ class HmmBaseline(RoadLocalizer):
         bins = int(conf["encoding"]["angle_bins"])
         self.hmm = map.cached(("hmm", params, bins), lambda: CellHMM(map.graph, map.states, bins, params))
         self.bins = bins
+        self.set_places(conf)
+
+    def set_places(self, conf: dict[str, Any]) -> None:
+        """How many top places an answer lists, and within how many metres two are one (``localization.places``)."""
+        self.top, self.merge_m = int(conf["localization"]["places"]["top"]), float(conf["localization"]["places"]["merge_m"])
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
         return token_observations(odometry, map, conf, int(conf["encoding"]["angle_bins"]))
@@ -36,11 +41,10 @@ class HmmBaseline(RoadLocalizer):
         return self._step(int(observation))
 
     def _step(self, token: int, evidence: np.ndarray | None = None) -> Answer:
-        """One token through the filter (with per-cell log-likelihood ``evidence``, if any); the answer."""
-        edge, confidence = self.hmm.update(token, evidence=evidence)
-        cells = np.flatnonzero(self.hmm.cell_edge == edge)
-        cell = int(cells[np.argmax(self.hmm.alpha[cells])])
-        self._answer = Answer(edge, confidence, tuple(self.hmm.grid.xy[cell]))
+        """One token through the filter (with per-cell log-likelihood ``evidence``, if any); the answer: the top place
+        of the forward belief, with the other top places."""
+        self.hmm.update(token, evidence=evidence)
+        self._answer = Answer.of_places(self.hmm.top_places(self.top, self.merge_m))
         return self._answer
 
     def answer(self) -> Answer:

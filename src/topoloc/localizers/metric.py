@@ -31,6 +31,7 @@ class MetricLocalizer(RoadLocalizer):
             coarse = map.cached(("metric", wide), lambda: MetricModel(map.graph, map.states, wide))
         self.coarse_model = coarse
         self.filter = CityFilter(model, coarse)
+        self.top, self.merge_m = int(conf["localization"]["places"]["top"]), float(conf["localization"]["places"]["merge_m"])
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
         steps = odometry_steps(odometry.xy, odometry.yaw, float(conf["localization"]["metric"]["cell_m"]))
@@ -45,8 +46,8 @@ class MetricLocalizer(RoadLocalizer):
         return self.answer()
 
     def answer(self) -> Answer:
-        est = self.filter.answer(0)
-        return Answer(est.edge, est.confidence, tuple(est.xy) if est.edge >= 0 else None)
+        """The top place of the belief, with the other top places (``localization.places``)."""
+        return Answer.of_places(self.filter.top_places(self.top, self.merge_m))
 
     def run_starts(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any],
                    starts: np.ndarray) -> list[tuple[int, Observations, Track]]:
@@ -65,9 +66,9 @@ class MetricLocalizer(RoadLocalizer):
             if len(fresh):
                 bank.start(fresh)
             bank.update(int(steps.direction[j]), float(steps.yaw[j]))
-            for b, est in enumerate(bank.answers()):
+            for b, places in enumerate(bank.places(self.top, self.merge_m)):
                 if first[b] <= j:
-                    answers[b].append(Answer(est.edge, est.confidence, tuple(est.xy) if est.edge >= 0 else None))
+                    answers[b].append(Answer.of_places(places))
         out = []
         for b, start in enumerate(starts):
             cells = bank.path(b)

@@ -43,6 +43,7 @@ class RnnFilter(HmmBaseline):
         self.weight = float(settings["evidence_weight"])
         self.log_floor = float(np.log(float(settings["floor"])))
         self.feature_dim = int(map.model.hparams.get("feature_dim", 0))
+        self.set_places(conf)
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
         """The drive's tokens, each with its continuous features: ``(token, features)``."""

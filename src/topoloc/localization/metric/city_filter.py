@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 from topoloc.localization.metric.dense_filter import COMPLEX, REAL, TINY, Estimate, MetricFilter
 from topoloc.localization.metric.map_model import MetricModel, MetricSettings
 from topoloc.localization.metric.von_mises import concentration, resultant_length
+from topoloc.localizer import Place
 
 
 def coarse_settings(settings: MetricSettings) -> MetricSettings:
@@ -170,6 +171,19 @@ class CityFilter:
     def answer(self, which: int = 0) -> Estimate:
         """The answer of filter ``which``."""
         return self.answers()[which]
+
+    def places(self, k: int, merge_m: float = 0.0) -> list[list[Place]]:
+        """Per filter, its ``k`` most probable places (of the coarse belief while in the coarse phase)."""
+        out = self.fine.places(k, merge_m)
+        if self.coarse is not None and self.in_coarse.any():
+            coarse = self.coarse.places(k, merge_m)
+            for b in np.flatnonzero(self.in_coarse):
+                out[b] = coarse[b]
+        return out
+
+    def top_places(self, k: int, merge_m: float = 0.0, which: int = 0) -> list[Place]:
+        """The ``k`` most probable places of filter ``which`` (:class:`topoloc.localizer.RankedFilter`)."""
+        return self.places(k, merge_m)[which]
 
     def path(self, which: int = 0) -> NDArray[np.int64]:
         """Filter ``which``'s path traced back (fine cells; -1 throughout while it is still in the coarse phase)."""

@@ -22,6 +22,8 @@ from numpy.typing import NDArray
 
 from topoloc.localization.metric.map_model import MetricModel
 from topoloc.localization.metric.von_mises import concentration, resultant_length
+from topoloc.localization.places import belief_places
+from topoloc.localizer import Place
 
 TWO_PI = 2.0 * math.pi
 TINY = float(np.finfo(np.float32).tiny)
@@ -340,6 +342,15 @@ class MetricFilter:
     def answer(self, which: int = 0) -> Estimate:
         """The answer of filter ``which``."""
         return self.answers()[which]
+
+    def places(self, k: int, merge_m: float = 0.0) -> list[list[Place]]:
+        """Per filter, its ``k`` most probable places (:func:`topoloc.localization.places.belief_places`)."""
+        return belief_places(self.group // self.classes, self.cell, self.weight, self.grid.edge, self.grid.xy,
+                             self.filters, self.grid.states.num_edges, k, merge_m)
+
+    def top_places(self, k: int, merge_m: float = 0.0, which: int = 0) -> list[Place]:
+        """The ``k`` most probable places of filter ``which`` (:class:`topoloc.localizer.RankedFilter`)."""
+        return self.places(k, merge_m)[which]
 
     def path(self, which: int = 0) -> NDArray[np.int64]:
         """A consistent cell sequence of filter ``which``, traced back from its last step's most probable cell.

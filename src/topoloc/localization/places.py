@@ -1,0 +1,46 @@
+"""The top places of a belief over cells of roads, for every filter of a bank at once: the ``top_places`` of the
+metric filter (:mod:`topoloc.localization.metric`) and of the token HMM (:mod:`topoloc.localization.hmm`, and so
+``rnn_filter``); see :class:`topoloc.localizer.RankedFilter`.
+
+A place is a road (undirected edge): its probability is the belief's mass on the road's cells (both directions),
+its position the road's most probable cell. Of every filter the :data:`CANDIDATES` times ``k`` most probable roads
+are ranked, places within ``merge_m`` metres of a more probable one merged into it
+(:func:`topoloc.localizer.merge_places`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from topoloc.localizer import Place, merge_places
+
+#: Roads ranked per place asked for (merging may fold several into one place).
+CANDIDATES = 4
+
+
+def belief_places(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDArray, cell_edge: NDArray[np.int64],
+                  cell_xy: NDArray[np.float64], filters: int, roads: int, k: int, merge_m: float = 0.0) -> list[list[Place]]:
+    """Per filter of ``filters``, its top ``k`` places, from the belief's entries: the filter that ``owner``\\ s
+    each entry, its ``cell`` and ``weight`` (entries of one cell may repeat: they add up); ``cell_edge`` and
+    ``cell_xy`` give each cell's road and position on a map of ``roads`` roads."""
+    owner, cell = np.asarray(owner, np.int64), np.asarray(cell, np.int64)
+    weight = np.asarray(weight, np.float64)
+    key = owner * roads + cell_edge[cell]
+    marginal = np.bincount(key, weights=weight, minlength=filters * roads).reshape(filters, roads)
+    m = min(roads, CANDIDATES * max(1, int(k)))
+    top = np.argpartition(-marginal, m - 1, axis=1)[:, :m] if m < roads else np.tile(np.arange(roads), (filters, 1))
+    wanted = np.zeros(filters * roads, bool)
+    wanted[(np.arange(filters)[:, None] * roads + top).ravel()] = True
+    mine = wanted[key] & (weight > 0)
+    order = np.lexsort((-weight[mine], key[mine]))  # per (filter, road), the most probable entry first
+    keys, cells = key[mine][order], cell[mine][order]
+    first = np.ones(len(keys), bool)
+    first[1:] = keys[1:] != keys[:-1]
+    best_key, best_cell = keys[first], cells[first]
+    out = []
+    for b in range(filters):
+        roads_b = top[b][marginal[b, top[b]] > 0]
+        at = np.searchsorted(best_key, b * roads + roads_b)
+        out.append(merge_places(roads_b, marginal[b, roads_b], cell_xy[best_cell[at]], k, merge_m))
+    return out
