@@ -102,7 +102,8 @@ def region_configs(config: Mapping[str, Any], base_dir: str | Path = ".") -> dic
 
     An entry is a config file (relative to ``base_dir``) or a mapping (which may name a config file under
     ``file``: the mapping's other keys are merged onto that file's); either is merged onto ``config`` without
-    its ``regions`` key, then filled and validated. InputError with one line naming the entry, the file or the
+    its ``regions`` key, then filled and validated. A region that names drives (``odometry.drives``) has those
+    drives only: the run's drives are another region's data, not merged into it. InputError with one line naming the entry, the file or the
     key: a file that cannot be read, a region named twice, a region config that names regions itself.
     """
     base = {k: v for k, v in config.items() if k != "regions"}
@@ -120,7 +121,10 @@ def region_configs(config: Mapping[str, Any], base_dir: str | Path = ".") -> dic
             data = entry
         if data.get("regions"):
             raise InputError(where, "a region's config cannot name regions itself")
-        merged = validate_and_fill(deep_merge(base, {k: v for k, v in data.items() if k != "regions"}), where)
+        own = deep_merge(base, {k: v for k, v in data.items() if k != "regions"})
+        if (data.get("odometry") or {}).get("drives"):
+            own["odometry"]["drives"] = copy.deepcopy(data["odometry"]["drives"])  # a region's drives are its own
+        merged = validate_and_fill(own, where)
         name = merged["region"]["name"]
         if name in configs:
             raise InputError(where, f"region {name!r} is named twice in regions")

@@ -3,8 +3,10 @@
 Inputs: ``csv_<region>`` for each region of ``conf['regions']``, the ``csv`` of that region's
 ``evaluate_localization`` (one row per drive and localizer, and ``all`` over its drives). Outputs: ``csv`` (the
 rows of every region with a ``region`` column first), ``table`` (markdown: localized share, median distance to
-localized and accuracy after, per region, drive and localizer, the oracle first) and ``figure`` (the localized
-share per region and drive, one bar per localizer). Metrics: ``<region>/<drive>/<localizer>/localized_share``.
+localized, accuracy after and the oracle's resolved share, then where the summary has them the median ratio to the
+oracle, the position error, the confident-wrong share and the expected calibration error, per region, drive and
+localizer, the oracle first) and ``figure`` (the localized share per region and drive, one bar per localizer).
+Metrics: ``<region>/<drive>/<localizer>/<figure>`` for the localized share, the confident-wrong share and the ECE.
 """
 
 from __future__ import annotations
@@ -25,6 +27,12 @@ from topoloc.io import atomic_path, write_text
 #: The columns of the cross-region table (from evaluate_localization's summary).
 COLUMNS = {"starts": "starts", "localized_share": "localized", "median_m": "median m",
            "accuracy_after": "acc. after", "oracle_resolved": "oracle resolved"}
+#: Further columns, shown where the summary has them (summaries before they existed lack them).
+EXTRA = {"median_ratio": "median ratio", "position_error_m": "position error m", "confident_wrong": "confident wrong",
+         "ece": "ECE"}
+#: The formats of the columns.
+FORMATS = {"starts": "{:.0f}", "median_m": "{:.0f}", "median_ratio": "{:.2f}", "position_error_m": "{:.1f}",
+           "confident_wrong": "{:.2%}"}
 
 
 def load(regions: list[str], inputs: dict[str, str]) -> pd.DataFrame:
@@ -42,16 +50,21 @@ def load(regions: list[str], inputs: dict[str, str]) -> pd.DataFrame:
 
 def markdown(summary: pd.DataFrame) -> str:
     """The table: one row per region, drive and localizer."""
-    head = ["region", "drive", "localizer", *COLUMNS.values()]
+    head = ["region", "drive", "localizer", *COLUMNS.values(), *EXTRA.values()]
     lines = ["# Localization per region and drive", "",
              ("Localized = share of the starts localized (see each region's localization.md); median m = median "
-              "distance to localized; acc. after = accuracy after localizing."), "",
+              "distance to localized; acc. after = accuracy after localizing; oracle resolved = share of the starts "
+              "the map's uniqueness limit resolves; median ratio = localized / oracle distance on those; position "
+              "error = median distance of the answer's position to the truth after localizing; confident wrong = "
+              "share of all answers wrong with confidence >= localization.evaluate.sure; ECE = expected calibration "
+              "error of all answers."), "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for row in summary.itertuples(index=False):
         values = [row.region, row.drive, row.localizer]
-        for key in COLUMNS:
-            value = getattr(row, key)
-            values.append("" if pd.isna(value) else (f"{value:.0f}" if key in ("starts", "median_m") else f"{value:.3f}"))
+        for key in [*COLUMNS, *EXTRA]:
+            value = getattr(row, key, float("nan"))
+            values.append("" if pd.isna(value) or (key in EXTRA and row.localizer == "oracle")
+                          else FORMATS.get(key, "{:.3f}").format(value))
         lines.append("| " + " | ".join(map(str, values)) + " |")
     return "\n".join(lines) + "\n"
 
@@ -84,5 +97,6 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         summary.to_csv(tmp, index=False, float_format="%.4f")
     write_text(outputs["table"], markdown(summary))
     figure(summary, outputs["figure"])
-    return {f"{r.region}/{r.drive}/{r.localizer}/localized_share": float(r.localized_share)
-            for r in summary.itertuples(index=False) if pd.notna(r.localized_share)}
+    return {f"{r.region}/{r.drive}/{r.localizer}/{key}": float(getattr(r, key))
+            for r in summary.itertuples(index=False) for key in ("localized_share", "confident_wrong", "ece")
+            if pd.notna(getattr(r, key, float("nan")))}

@@ -3,7 +3,9 @@
 Sources (``odometry.source``):
 
 * ``simulated``: random drives on the map with a noise model (:mod:`topoloc.odometry.simulate`);
-* ``kitti_poses``: a KITTI poses file (ground truth or any SLAM output), optional timestamps;
+* ``kitti_poses``: a KITTI poses file (ground truth or any SLAM output), optional timestamps; with a drive's
+  ``noise`` the poses' motion is corrupted by the odometry noise model (:func:`topoloc.motion.noise.noisy_poses`,
+  seeded): the ground truth made a stereo-VO-like odometry;
 * ``kitti_stereo``: our stereo visual odometry on a KITTI sequence folder (:mod:`topoloc.odometry.stereo_vo`);
 * ``rendered``: the same stereo VO on a drive rendered from the map by the ``render_drive`` stage
   (:mod:`topoloc.render.render_drive`; drive names from :mod:`topoloc.render.conditions`): its sequence
@@ -30,6 +32,7 @@ from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json
 from topoloc.motion.georef import Georeference, fit_rigid, from_origin, grid_heading_deg, to_map
+from topoloc.motion.noise import OdometryNoise, noisy_poses
 from topoloc.motion.poses import (
     planar_track,
     planar_yaw,
@@ -84,6 +87,10 @@ def _load_kitti(conf: dict[str, Any], drive: str, inputs: dict[str, str]) -> dic
     if conf["source"] == "kitti_poses":
         est = read_poses(inputs["poses"])
         flagged = np.zeros(len(est), dtype=bool)
+        noise = conf["drives"][drive].get("noise")
+        if noise:  # a noisy odometry made from the poses (e.g. the ground truth at a stereo-VO level), seeded
+            est = noisy_poses(est, OdometryNoise.from_dict(noise), np.random.default_rng(int(noise["seed"])))
+            extra["noise"] = dict(noise)
     else:
         sequence = conf["drives"][drive]["sequence"] if conf["source"] == "kitti_stereo" else Path(inputs["calib"]).parent
         est, flagged, extra = run_stereo_vo(sequence, conf["stereo"])
