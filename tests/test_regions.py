@@ -61,3 +61,18 @@ def test_the_summary_puts_regions_side_by_side(tmp_path):
     (tmp_path / "b.csv").write_text("drive,localizer\nd0,metric\n")
     with pytest.raises(InputError, match="no 'accuracy_after' column"):
         summarize({"regions": ["a", "b"]}, inputs, outputs)
+
+
+def test_a_region_that_names_drives_has_those_only(tmp_path):
+    """The run's drives (another region's data) are not merged into a region that names its own."""
+    (tmp_path / "k00.yaml").write_text(KITTI)
+    config = load(overrides={"region": {"name": "base", "osm_file": "map.osm"},
+                             "odometry": {"source": "kitti_poses", "drives": {"orb": {"poses": "o.txt", "gps": "g.csv"}}},
+                             "regions": [{"file": "k00.yaml", "odometry": {"drives": {"noisy": {
+                                 "poses": "p.txt", "gps": "g.csv", "noise": {"scale_error": 0.01, "distance_noise": 0.0,
+                                                                             "heading_drift_deg_per_100m": 0.5, "heading_noise_deg": 0.0}}}}},
+                                 {"region": {"name": "bb", "osm_file": None, "bbox": [1, 2, 3, 4]}}]})
+    regions = region_configs(config, tmp_path)
+    assert sorted(regions["k00"]["odometry"]["drives"]) == ["gt", "noisy"]  # not the run's orb
+    assert regions["k00"]["odometry"]["drives"]["noisy"]["noise_seed"] == 0  # filled and validated
+    assert sorted(regions["bb"]["odometry"]["drives"]) == ["orb"]  # a region without drives of its own: the run's

@@ -73,3 +73,33 @@ def test_every_noise_setting_of_the_config_has_the_one_set_of_keys():
     settings = _noise_settings(schema)
     assert {".odometry.simulated.noise", ".dataset.simulated.noise", ".place.odometry_noise"} <= set(settings)
     assert all(keys == set(NOISE_KEYS) for keys in settings.values()), settings
+
+
+def test_noisy_poses_keep_the_poses_without_noise_and_drift_by_the_set_level():
+    from topoloc.motion.noise import noisy_poses
+    from topoloc.motion.poses import planar_track, planar_yaw, poses_from_planar
+    from topoloc.odometry.evaluate import evaluate
+
+    # a 1.2 km drive of gentle curves, a frame per metre, the camera 1.7 m up and pitched 2 degrees
+    s = np.arange(1200.0)
+    yaw = 0.4 * np.sin(s / 150.0)
+    xy = np.cumsum(np.column_stack([np.cos(yaw), np.sin(yaw)]), axis=0)
+    pitch = np.radians(2.0)
+    tilt = np.array([[1, 0, 0], [0, np.cos(pitch), -np.sin(pitch)], [0, np.sin(pitch), np.cos(pitch)]])
+    poses = poses_from_planar(xy, yaw)
+    poses[:, :3, :3] = poses[:, :3, :3] @ tilt
+    poses[:, 1, 3] = -1.7
+    same = noisy_poses(poses, OdometryNoise(0.0, 0.0, 0.0, 0.0), np.random.default_rng(0))
+    assert np.allclose(same, poses, atol=1e-9)
+    drift = noisy_poses(poses, OdometryNoise(0.0, 0.0, 0.5, 0.0), np.random.default_rng(0))
+    assert np.allclose(drift[:, 1, 3], -1.7) and np.allclose(drift[:, 1, :3], poses[:, 1, :3])  # height and tilt kept
+    heading_error = np.degrees(np.unwrap(planar_yaw(drift)) - np.unwrap(planar_yaw(poses)))
+    assert heading_error[-1] == pytest.approx(0.5 * 12, rel=0.01)  # 0.5 deg per 100 m over 1.2 km
+    assert evaluate(poses, drift)["r_err_deg_per_100m"] == pytest.approx(0.5, rel=0.05)
+    scaled = noisy_poses(poses, OdometryNoise(0.01, 0.0, 0.0, 0.0), np.random.default_rng(0))
+    assert evaluate(poses, scaled)["t_err_pct"] == pytest.approx(1.0, rel=0.05)
+    assert np.hypot(*(planar_track(scaled)[-1] - xy[0])) == pytest.approx(1.01 * np.hypot(*(xy[-1] - xy[0])), rel=1e-3)
+    # seeded: the same seed, the same odometry
+    level = OdometryNoise(0.01, 0.01, 0.5, 0.02)
+    assert np.array_equal(noisy_poses(poses, level, np.random.default_rng(3)), noisy_poses(poses, level, np.random.default_rng(3)))
+    assert not np.array_equal(noisy_poses(poses, level, np.random.default_rng(3)), noisy_poses(poses, level, np.random.default_rng(4)))

@@ -87,10 +87,10 @@ def _load_kitti(conf: dict[str, Any], drive: str, inputs: dict[str, str]) -> dic
     if conf["source"] == "kitti_poses":
         est = read_poses(inputs["poses"])
         flagged = np.zeros(len(est), dtype=bool)
-        noise = conf["drives"][drive].get("noise")
+        noise, seed = conf["drives"][drive].get("noise"), int(conf["drives"][drive].get("noise_seed", 0))
         if noise:  # a noisy odometry made from the poses (e.g. the ground truth at a stereo-VO level), seeded
-            est = noisy_poses(est, OdometryNoise.from_dict(noise), np.random.default_rng(int(noise["seed"])))
-            extra["noise"] = dict(noise)
+            est = noisy_poses(est, OdometryNoise.from_dict(noise), np.random.default_rng(seed))
+            extra["noise"] = {**noise, "seed": seed}
     else:
         sequence = conf["drives"][drive]["sequence"] if conf["source"] == "kitti_stereo" else Path(inputs["calib"]).parent
         est, flagged, extra = run_stereo_vo(sequence, conf["stereo"])

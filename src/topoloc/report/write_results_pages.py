@@ -27,7 +27,7 @@ TASKS = {"localization": "Localization", "trajectory": "Trajectory learning", "o
          "place": "Place recognition", "route_following": "Route following", "pipeline": "Pipeline"}
 #: Benchmark script (results/benchmarks/<name>.md) -> task; any other lands on the pipeline page.
 BENCHMARKS = {
-    "bench_localization": "localization", "bench_train": "trajectory", "bench_dataset": "trajectory",
+    "bench_localization": "localization", "bench_real_drives": "localization", "bench_train": "trajectory", "bench_dataset": "trajectory",
     "bench_odometry": "odometry", "bench_render": "odometry", "bench_place": "place", "bench_drive": "route_following",
 }
 #: Experiment (results/{region}/experiments/<name>/summary.md) -> task; any other lands on the pipeline page.
