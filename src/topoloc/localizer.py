@@ -68,20 +68,29 @@ def merge_places(states: Sequence[int], probability: Sequence[float], xy: NDArra
     most probable first."""
     p = np.asarray(probability, float)
     pos = np.full((len(p), 2), np.nan) if xy is None else np.asarray(xy, float).reshape(-1, 2)
-    kept: list[list] = []  # [state, probability, xy]
-    for i in np.argsort(-p, kind="stable"):
-        if not p[i] > 0:
+    order = np.argsort(-p, kind="stable")
+    return merge_sorted([int(states[i]) for i in order], p[order].tolist(), pos[order, 0].tolist(), pos[order, 1].tolist(),
+                        k, merge_m)
+
+
+def merge_sorted(states: list[int], probability: list[float], x: list[float], y: list[float], k: int,
+                 merge_m: float = 0.0) -> list[Place]:
+    """:func:`merge_places` of candidates already sorted by decreasing probability, as plain lists (the fast path
+    of the filters, called every step)."""
+    kept: list[list] = []  # [state, probability, x, y]
+    for state, p, px, py in zip(states, probability, x, y):
+        if not p > 0:
             break
-        near = None
-        if merge_m > 0 and np.isfinite(pos[i]).all():
-            near = next((place for place in kept if place[2] is not None
-                         and math.hypot(place[2][0] - pos[i, 0], place[2][1] - pos[i, 1]) <= merge_m), None)
-        if near is not None:
-            near[1] += float(p[i])
-        else:
-            kept.append([int(states[i]), float(p[i]), (float(pos[i, 0]), float(pos[i, 1])) if np.isfinite(pos[i]).all() else None])
-    kept.sort(key=lambda place: -place[1])
-    return [Place(state, probability, xy) for state, probability, xy in kept[:k]]
+        if merge_m > 0 and px == px and py == py:  # not NaN
+            near = next((place for place in kept if abs(place[2] - px) <= merge_m and abs(place[3] - py) <= merge_m
+                         and math.hypot(place[2] - px, place[3] - py) <= merge_m), None)
+            if near is not None:
+                near[1] += p
+                continue
+        kept.append([state, p, px, py])
+    if len(kept) > 1:
+        kept.sort(key=lambda place: -place[1])
+    return [Place(state, p, (px, py) if px == px and py == py else None) for state, p, px, py in kept[:k]]
 
 
 @dataclass(frozen=True)

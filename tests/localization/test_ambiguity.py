@@ -6,13 +6,14 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 from localization_helpers import drive_along, mirror_loop
 
 from topoloc.config import load
 from topoloc.localization.drive_on_map import write_geojson
 from topoloc.localization.roadmap import RoadMap
-from topoloc.localizer import Place, Track, merge_places
+from topoloc.localizer import Answer, Place, Track, merge_places
 from topoloc.motion.poses import Odometry
 from topoloc.registry import make
 
@@ -69,8 +70,6 @@ def test_the_places_columns_and_the_geojson(mirror, tmp_path):
     assert (cols["place1_state"] == track.state).all() and np.allclose(cols["place1_prob"], track.confidence)
     ranked = np.column_stack([np.nan_to_num(cols[f"place{i}_prob"]) for i in (1, 2, 3)])
     assert (np.diff(ranked, axis=1) <= 1e-9).all() and (ranked.sum(axis=1) <= 1.0 + 1e-5).all()
-    import pandas as pd
-
     answers = pd.DataFrame({"frame": observations.frame, "path": track.path, "confidence": track.confidence,
                             "x": track.xy[:, 0], "y": track.xy[:, 1], **cols})
     write_geojson(tmp_path / "loc.geojson", graph, answers, "metric")
@@ -87,6 +86,8 @@ def test_merge_places_adds_up_places_within_merge_m():
     unmerged = merge_places([7, 8, 9, 10, 11], [0.3, 0.25, 0.35, 0.05, 0.05], xy, k=2, merge_m=0.0)
     assert [p.state for p in unmerged] == [9, 7]
     assert merge_places([1], [0.0], None, k=3) == []
-    # a localizer without places: the answer itself is its one place
-    track = Track.of_answers([])
-    assert track.place_columns(2)["place2_state"].shape == (0,)
+    # a localizer without places: the answer itself is its one place, none without an answer
+    track = Track.of_answers([Answer(4, 0.7, (1.0, 2.0)), Answer(-1, 0.0)])
+    cols = track.place_columns(2)
+    assert cols["place1_state"].tolist() == [4, -1] and cols["place1_prob"][0] == 0.7 and cols["place1_y"][0] == 2.0
+    assert cols["place2_state"].tolist() == [-1, -1] and np.isnan(cols["place2_prob"]).all()

@@ -78,6 +78,7 @@ class CellHMM:
         self.spacing = graph.virtual_node_spacing_m
         self.grid = CellGrid(graph, states, Chains.of_states(states), params.cell_m, params.heading_window_m)
         self.cell_edge, self.cell_heading = self.grid.edge, self.grid.heading
+        self._owner, self._cells = np.zeros(self.num_cells, np.int64), np.arange(self.num_cells)  # for top_places
         self._build_moves()
 
     @property
@@ -182,8 +183,7 @@ class CellHMM:
 
     def top_places(self, k: int, merge_m: float = 0.0) -> list[Place]:
         """The ``k`` most probable places of the forward belief (:class:`topoloc.localizer.RankedFilter`)."""
-        n = self.num_cells
-        return belief_places(np.zeros(n, np.int64), np.arange(n), self.alpha, self.cell_edge, self.grid.xy, 1,
+        return belief_places(self._owner, self._cells, self.alpha, self.cell_edge, self.grid.xy, 1,
                              self.states.num_edges, k, merge_m)[0]
 
     def path(self) -> tuple[NDArray[np.int64], int]:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from topoloc.localizer import Place, merge_places
+from topoloc.localizer import Place, merge_sorted
 
 #: Roads ranked per place asked for (merging may fold several into one place).
 CANDIDATES = 4
@@ -25,22 +25,23 @@ def belief_places(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDA
     each entry, its ``cell`` and ``weight`` (entries of one cell may repeat: they add up); ``cell_edge`` and
     ``cell_xy`` give each cell's road and position on a map of ``roads`` roads."""
     owner, cell = np.asarray(owner, np.int64), np.asarray(cell, np.int64)
-    weight = np.asarray(weight, np.float64)
+    weight = np.asarray(weight)
     key = owner * roads + cell_edge[cell]
     marginal = np.bincount(key, weights=weight, minlength=filters * roads).reshape(filters, roads)
     m = min(roads, CANDIDATES * max(1, int(k)))
     top = np.argpartition(-marginal, m - 1, axis=1)[:, :m] if m < roads else np.tile(np.arange(roads), (filters, 1))
+    prob = np.take_along_axis(marginal, top, axis=1)
+    order = np.argsort(-prob, axis=1, kind="stable")  # most probable first
+    top, prob = np.take_along_axis(top, order, axis=1), np.take_along_axis(prob, order, axis=1)
     wanted = np.zeros(filters * roads, bool)
     wanted[(np.arange(filters)[:, None] * roads + top).ravel()] = True
-    mine = wanted[key] & (weight > 0)
-    order = np.lexsort((-weight[mine], key[mine]))  # per (filter, road), the most probable entry first
-    keys, cells = key[mine][order], cell[mine][order]
-    first = np.ones(len(keys), bool)
-    first[1:] = keys[1:] != keys[:-1]
-    best_key, best_cell = keys[first], cells[first]
-    out = []
-    for b in range(filters):
-        roads_b = top[b][marginal[b, top[b]] > 0]
-        at = np.searchsorted(best_key, b * roads + roads_b)
-        out.append(merge_places(roads_b, marginal[b, roads_b], cell_xy[best_cell[at]], k, merge_m))
-    return out
+    mine = np.flatnonzero(wanted[key] & (weight > 0))
+    best = np.zeros(filters * roads, weight.dtype)  # per (filter, road): the largest entry, and its cell
+    np.maximum.at(best, key[mine], weight[mine])
+    hit = mine[weight[mine] == best[key[mine]]][::-1]  # written last to first: the first entry of a tie wins
+    best_cell = np.zeros(filters * roads, np.int64)
+    best_cell[key[hit]] = cell[hit]
+    xy = cell_xy[best_cell[np.arange(filters)[:, None] * roads + top]]
+    xy = np.where((prob > 0)[..., None], xy, np.nan)
+    states, probs, xs, ys = top.tolist(), prob.tolist(), xy[..., 0].tolist(), xy[..., 1].tolist()
+    return [merge_sorted(states[b], probs[b], xs[b], ys[b], k, merge_m) for b in range(filters)]
