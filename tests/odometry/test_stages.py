@@ -92,6 +92,20 @@ def test_kitti00_labels_and_segments(kitti00, kitti00_graph, tmp_path, poses):
     assert (frames.edge_distance_m.to_numpy()[tokens.frame] <= 5.0).mean() >= 0.95
 
 
+@pytest.mark.kitti
+def test_kitti00_ground_truth_made_a_noisy_odometry(kitti00, kitti00_graph, tmp_path):
+    """A drive's noise (odometry.drives.<drive>.noise, seeded): the ground truth at a stereo-VO level, evaluated
+    against itself; the same seed gives the same poses."""
+    level = {"scale_error": 0.01, "distance_noise": 0.01, "heading_drift_deg_per_100m": 0.5, "heading_noise_deg": 0.02}
+    conf = {**CONF, "source": "kitti_poses", "drive": "vo", "drives": {"vo": {"noise": level, "noise_seed": 0}}}
+    metrics = extract_odometry.run(conf, kitti_inputs(kitti00, kitti00_graph, "00_gt.txt"), odometry_outputs(tmp_path / "a", "vo"))
+    assert 1.0 < metrics["t_err_pct"] < 2.0 and 0.3 < metrics["r_err_deg_per_100m"] < 0.8, metrics
+    assert metrics["labels_unconnected_changes"] == 0  # labels from the ground truth, as before
+    extract_odometry.run(conf, kitti_inputs(kitti00, kitti00_graph, "00_gt.txt"), odometry_outputs(tmp_path / "b", "vo"))
+    assert (tmp_path / "a" / "vo" / "poses.txt").read_text() == (tmp_path / "b" / "vo" / "poses.txt").read_text()
+    assert json.loads((tmp_path / "a" / "vo" / "odometry.json").read_text())["noise"] == {**level, "seed": 0}
+
+
 def straight_drive(folder, frames=60):
     """A 60 m straight KITTI poses file (forward along +z)."""
     folder.mkdir(parents=True, exist_ok=True)

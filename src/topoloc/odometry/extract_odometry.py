@@ -87,7 +87,8 @@ def _load_kitti(conf: dict[str, Any], drive: str, inputs: dict[str, str]) -> dic
     if conf["source"] == "kitti_poses":
         est = read_poses(inputs["poses"])
         flagged = np.zeros(len(est), dtype=bool)
-        noise, seed = conf["drives"][drive].get("noise"), int(conf["drives"][drive].get("noise_seed", 0))
+        files = conf["drives"].get(drive) or {}  # the stage's inputs name the files; the drive's config adds noise
+        noise, seed = files.get("noise"), int(files.get("noise_seed", 0))
         if noise:  # a noisy odometry made from the poses (e.g. the ground truth at a stereo-VO level), seeded
             est = noisy_poses(est, OdometryNoise.from_dict(noise), np.random.default_rng(seed))
             extra["noise"] = {**noise, "seed": seed}
