@@ -61,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
         ev = conf["localization"]["evaluate"]
         lconf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
         cols = ["drive", "localizer", "starts", "localized_share", "median_m", "p90_m", "median_ratio", "accuracy_after",
-                "position_error_m", "confident_wrong", "cpu_s"]
+                "position_error_m", "confident_wrong", "ece", "cpu_s"]
         print(f"## KITTI 00, a start every {ev['start_every_m']:.0f} m ({graph.num_edges} roads)\n")
         print(summary[cols].to_markdown(index=False, floatfmt=".3f"))
         first = table[table.start == 0][["drive", "localizer", "localized_m", "oracle_m", "accuracy_after", "position_error_m"]]
