@@ -66,7 +66,12 @@ def test_without_evidence_it_is_the_hmm_and_with_it_it_follows_the_rnn(setting):
                                                                             "evidence_weight": 1.0}}}
     other = make("rnn_filter")
     other.reset(RoadMap(graph, model=sure), loud)
-    assert other.run(obs.items).state[-1] == 7 != base.state[-1]
+    track = other.run(obs.items)
+    assert track.state[-1] == 7 != base.state[-1]
+    # its answers rank places as the HMM's do: the answer is the top one, the road the model is sure of
+    places = track.places[-1]
+    assert places[0].state == 7 and places[0].probability == pytest.approx(track.confidence[-1]) and len(places) <= 3
+    assert all(a.probability >= b.probability for a, b in zip(places, places[1:]))
 
 
 def test_a_model_of_another_map_is_refused(setting):
