@@ -1,0 +1,54 @@
+# The interactive viewers: one offline HTML file per drive, and one of teach and repeat (topoloc.viewer).
+
+
+rule view_drive:
+    """The interactive map of a drive: every localizer's answers over time, the truth, the metric filter's belief."""
+    input:
+        graph=rules.build_graph.output.graph,
+        poses=rules.extract_odometry.output.poses,
+        frames=rules.extract_odometry.output.frames,
+        answers=rules.decode_trajectories.output.answers,
+        stats=rules.decode_trajectories.output.stats,
+        starts=rules.evaluate_localization.output.starts,
+    output:
+        html=report(
+            "results/{region}/viewer/{drive}.html",
+            caption="../report/viewer.rst",
+            category="Viewer",
+            labels={"region": "{region}", "drive": "{drive}", "figure": "interactive viewer"},
+        ),
+    params:
+        conf=lambda wildcards: {k: config[k] for k in ("localization", "segmentation", "encoding", "viewer")}
+        | {"drive": wildcards.drive, "region": config["region"]["name"]},
+        code=code("topoloc.viewer.view_drive"),
+    log:
+        "results/{region}/logs/view_drive_{drive}.log",
+    benchmark:
+        "results/{region}/benchmarks/view_drive_{drive}.tsv"
+    script:
+        "../scripts/view_drive.py"
+
+
+rule view_repeat:
+    """The teach-and-repeat viewer: topometric map, repeat track, each method's localization and the camera frame."""
+    input:
+        graph=rules.build_graph.output.graph,
+        vertices=rules.build_topometric_map.output.vertices,
+        frames=rules.localize_repeat.output.frames,
+        repeat="results/{region}/places/repeat/places.npz",
+    output:
+        html=report(
+            "results/{region}/viewer/teach_repeat.html",
+            caption="../report/viewer_repeat.rst",
+            category="Viewer",
+            labels={"region": "{region}", "figure": "teach and repeat viewer"},
+        ),
+    params:
+        conf={"viewer": config["viewer"], "region": config["region"]["name"]},
+        code=code("topoloc.viewer.view_repeat"),
+    log:
+        "results/{region}/logs/view_repeat.log",
+    benchmark:
+        "results/{region}/benchmarks/view_repeat.tsv"
+    script:
+        "../scripts/view_repeat.py"
