@@ -3,7 +3,9 @@ a localizer can be switched off, the chart jumps the slider, playback runs."""
 
 from __future__ import annotations
 
+import os
 import time
+from pathlib import Path
 
 import pytest
 from viewer_helpers import embedded
@@ -92,3 +94,27 @@ def test_the_chart_jumps_the_slider_and_playback_runs(page):
     driver.find_element(By.ID, "tl-play").click()
     assert driver.execute_script("return window.topolocViewer.row()") > row
     assert console_errors(driver) == []
+
+
+REPO = Path(__file__).resolve().parents[2]
+REAL = [REPO / "results" / "kitti00" / "viewer" / "gt.html", REPO / "results" / "helsinki" / "viewer" / "ren00_clear_noon.html"]
+
+
+def test_screenshot_of_a_real_viewer(browser, tmp_path):
+    """The README's screenshot: a real drive's viewer while the belief collapses (set TOPOLOC_SCREENSHOT to a path,
+    e.g. docs/images/viewer.png, to keep it). Skipped where the pipeline has not written a real viewer."""
+    real = next((p for p in REAL if p.is_file()), None)
+    if real is None:
+        pytest.skip("no real viewer in results/ (run the pipeline: rule view_drive)")
+    browser.get_log("browser")
+    open_viewer(browser, real)
+    blob = embedded(real)
+    sure = [m["idx"] for m in blob["marks"] if m["kind"] == "sure"]
+    row = int(0.8 * min(sure)) if sure else len(blob["time"]["frame"]) // 4
+    browser.execute_script("window.topolocViewer.setRow(arguments[0]);"
+                           "window.topolocViewer.map.setView(window.topolocViewer.truthLatLng(), 16);", row)
+    time.sleep(0.5)
+    out = Path(os.environ.get("TOPOLOC_SCREENSHOT", tmp_path / "viewer.png"))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    assert browser.save_screenshot(str(out)) and out.stat().st_size > 20_000
+    assert console_errors(browser) == []
