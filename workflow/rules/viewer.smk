@@ -52,3 +52,22 @@ rule view_repeat:
         "results/{region}/benchmarks/view_repeat.tsv"
     script:
         "../scripts/view_repeat.py"
+
+
+rule view_city:
+    """The city-scale viewer (experiment city): per map one drive, the metric filter's belief shrinking to one road."""
+    input:
+        **{f"osm_{name}": EXPERIMENTS["city"]["osm"].get(name, f"experiments.city.osm has no file for {name}")
+           for name in EXPERIMENTS["city"]["maps"]},
+    output:
+        **{f"html_{name}": f"results/{{region}}/experiments/city/viewer/{name}.html" for name in EXPERIMENTS["city"]["maps"]},
+    params:
+        conf={k: config[k] for k in ("localization", "segmentation", "encoding", "graph", "viewer")}
+        | {"city": EXPERIMENTS["city"]},
+        code=code("topoloc.viewer.view_city"),
+    log:
+        "results/{region}/logs/view_city.log",
+    benchmark:
+        "results/{region}/benchmarks/view_city.tsv"
+    script:
+        "../scripts/view_city.py"

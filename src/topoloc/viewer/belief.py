@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pandas as pd
 from numpy.typing import NDArray
 from tqdm import tqdm
 
@@ -44,18 +45,22 @@ def belief_moments(road: RoadMap, odometry: Odometry, conf: dict[str, Any], ever
                    most_points: int, latlon: LatLon) -> dict[str, Any]:
     """The metric filter from the drive's first frame, step by step; at the first step and then every
     ``every_m`` metres driven (and the last step): ``frame`` (the step's frame), ``roads`` (``[[edge, p], ...]``,
-    the ``top_roads`` most probable roads) and ``heat`` (:func:`heat_points`)."""
+    the ``top_roads`` most probable roads) and ``heat`` (:func:`heat_points`); and ``answers``, the filter's answer
+    at every step (an answers table: ``localizer`` metric, ``frame``, ``state``, ``confidence``, ``x``, ``y``)."""
     localizer = MetricLocalizer()
     observations = localizer.observe(odometry, road, conf)
     localizer.reset(road, conf)
     driven = odometry.driven_m
     cell_m = float(conf["localization"]["metric"]["cell_m"])
     out: dict[str, Any] = {"frame": [], "roads": [], "heat": []}
+    steps: list[tuple[int, int, float, float, float]] = []
     next_m = -np.inf
     last = len(observations.items) - 1
     for j, item in enumerate(tqdm(observations.items, desc="belief", unit="step", mininterval=5, disable=None)):
-        localizer.update(item)
+        answer = localizer.update(item)
         frame = int(observations.frame[j])
+        x, y = answer.xy if answer.xy is not None else (np.nan, np.nan)
+        steps.append((frame, int(answer.state), float(answer.confidence), float(x), float(y)))
         if driven[frame] < next_m and j != last:
             continue
         next_m = driven[frame] + every_m
@@ -69,4 +74,5 @@ def belief_moments(road: RoadMap, odometry: Odometry, conf: dict[str, Any], ever
         out["frame"].append(frame)
         out["roads"].append([[int(e), round(float(marginal[e]) / max(total, 1e-300), 4)] for e in order])
         out["heat"].append(heat_points(cell_xy, weight, cell_m, most_points, latlon))
+    out["answers"] = pd.DataFrame(steps, columns=["frame", "state", "confidence", "x", "y"]).assign(localizer="metric")
     return out

@@ -38,12 +38,13 @@ def sure_frame(driven: NDArray[np.float64], start: int, localized_m: float) -> i
     return int(min(np.searchsorted(driven, driven[start] + localized_m), len(driven) - 1))
 
 
-def drive_data(title: str, graph: RoadGraph, odometry: Odometry, answers: pd.DataFrame, conf: dict[str, Any],
+def drive_data(title: str, graph: RoadGraph, odometry: Odometry, answers: pd.DataFrame | None, conf: dict[str, Any],
                truth_xy: NDArray[np.float64] | None = None, times: NDArray[np.float64] | None = None,
                starts: list[int] | None = None, localized_m: dict[str, float] | None = None) -> ViewerData:
     """The viewer's data of one drive.
 
-    ``answers``: one run per localizer from the drive's first frame (columns :data:`ANSWER_COLUMNS`). ``truth_xy``:
+    ``answers``: one run per localizer from the drive's first frame (columns :data:`ANSWER_COLUMNS`), or None for
+    the metric filter's answers of the belief's run (city maps: one localizer, run once). ``truth_xy``:
     the true (or georeferenced) position per frame, in the graph's CRS, or None. ``starts``: the evaluation's start
     frames. ``localized_m``: per localizer (and ``oracle``) the metres from the first start until it was localized,
     as the evaluation counts it; None: where the answer first reaches ``localization.evaluate.sure``."""
@@ -58,6 +59,15 @@ def drive_data(title: str, graph: RoadGraph, odometry: Odometry, answers: pd.Dat
                             "t_s": np.round(times[row_frames], 2).tolist()})
     if truth_xy is not None:
         data.truth = latlon(truth_xy[row_frames])
+    road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], conf["localization"]["decode"]["max_skip_m"])
+    loc_conf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
+    belief = belief_moments(road, odometry, loc_conf, float(view["belief_every_m"]), int(view["top_roads"]),
+                            int(view["heat_points"]), latlon)
+    if belief["frame"]:
+        data.belief = {"idx": rows_of(belief["frame"], row_frames).tolist(), "roads": belief["roads"], "heat": belief["heat"],
+                       "names": road_names(graph, belief["roads"])}
+    if answers is None:
+        answers = belief["answers"]
     labels = {name: cls.label for name, cls in registry(ROAD_OBSERVATIONS).items()}
     sure = float(conf["localization"]["evaluate"]["sure"])
     first_start = int(starts[0]) if starts else 0
@@ -92,13 +102,6 @@ def drive_data(title: str, graph: RoadGraph, odometry: Odometry, answers: pd.Dat
         if truth_xy is not None:
             data.marks.append(mark("start", "starts", int(rows_of([start], row_frames)[0]), latlon(truth_xy[start])[0],
                                    f"start {k} at {driven[start]:.0f} m (frame {start})"))
-    road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], conf["localization"]["decode"]["max_skip_m"])
-    loc_conf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
-    belief = belief_moments(road, odometry, loc_conf, float(view["belief_every_m"]), int(view["top_roads"]),
-                            int(view["heat_points"]), latlon)
-    if belief["frame"]:
-        data.belief = {"idx": rows_of(belief["frame"], row_frames).tolist(), "roads": belief["roads"], "heat": belief["heat"],
-                       "names": road_names(graph, belief["roads"])}
     return data
 
 
