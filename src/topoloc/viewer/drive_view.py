@@ -53,10 +53,9 @@ def drive_data(title: str, graph: RoadGraph, odometry: Odometry, answers: pd.Dat
     count = len(odometry)
     driven = truth_driven(truth_xy) if truth_xy is not None else odometry.driven_m
     row_frames = thin_rows(count, int(view["max_rows"]))
-    times = np.asarray(times, float) if times is not None else np.arange(count, dtype=float)
     data = ViewerData(title=title, sure=float(conf["localization"]["evaluate"]["sure"]),
                       time={"frame": row_frames.tolist(), "driven_m": np.round(driven[row_frames], 1).tolist(),
-                            "t_s": np.round(times[row_frames], 2).tolist()})
+                            "t_s": np.round(np.asarray(times, float)[row_frames], 2).tolist() if times is not None else None})
     if truth_xy is not None:
         data.truth = latlon(truth_xy[row_frames])
     road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], conf["localization"]["decode"]["max_skip_m"])

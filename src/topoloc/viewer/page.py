@@ -55,6 +55,7 @@ class ViewerData:
     ``marks``: points with ``kind`` (start, sure, oracle, fail), ``name``, ``idx``, ``lat``, ``lon``, ``label``.
     ``lines``: static polylines (``name``, ``color``, ``latlngs``). ``images``: ``idx`` and ``src`` (data URIs).
     ``text``: ``idx`` and ``text`` (a status line per moment, e.g. the command). ``time['t_s']`` may be None.
+    ``fit_roads``: open on the whole road graph (a city, to see the belief shrink), else on the drive.
     """
 
     title: str
@@ -68,6 +69,7 @@ class ViewerData:
     text: dict[str, list[Any]] | None = None
     sure: float = 0.9
     notes: list[str] = field(default_factory=list)
+    fit_roads: bool = False
 
 
 def agent(name: str, label: str, index: int, rows: NDArray[np.int64], latlon: list[list[float]] | None,
@@ -123,6 +125,8 @@ def render_html(graph: RoadGraph | None, data: ViewerData, tiles: str | None = N
     """The whole HTML page of ``data`` over ``graph``'s roads (None: no road layer, e.g. teach and repeat)."""
     points = [p for p in (data.truth or [])] + [p for line in data.lines for p in line["latlngs"]]
     roads = road_features(graph, latlon_of(graph.crs)) if graph is not None else None
+    if data.fit_roads and roads is not None:
+        points = []
     if not points and roads is not None:  # the view opens on the drive, else on the whole map
         points += [[c[1], c[0]] for f in roads["features"] for c in f["geometry"]["coordinates"]]
     if not points:

@@ -55,6 +55,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
             lat, lon = data.truth[row]
             data.marks.append({"kind": "oracle", "name": "oracle", "idx": row, "lat": lat, "lon": lon,
                                "label": f"oracle: unique after {oracle_m:.0f} m"})
+        data.fit_roads = True
         data.notes.append(f"{graph.num_edges} roads, {km:.0f} km; the belief is the metric filter's, summed on a grid "
                           "that is coarser while it is spread over the city.")
         size = write_viewer(outputs[f"html_{map_name}"], graph, data, conf["viewer"]["tiles"])
