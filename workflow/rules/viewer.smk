@@ -41,7 +41,7 @@ rule view_repeat:
             "results/{region}/viewer/teach_repeat.html",
             caption="../report/viewer_repeat.rst",
             category="Viewer",
-            labels={"region": "{region}", "figure": "teach and repeat viewer"},
+            labels={"region": "{region}", "drive": "repeat drive", "figure": "teach and repeat viewer"},
         ),
     params:
         conf={"viewer": config["viewer"], "region": config["region"]["name"]},
