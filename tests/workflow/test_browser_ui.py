@@ -105,6 +105,8 @@ def test_the_report_and_the_mlflow_ui_show_the_runs(mlflow_ui):
         wait.until(lambda d: "Results" in d.find_element(By.TAG_NAME, "body").text)
         driver.find_element(By.XPATH, "//*[normalize-space(text())='Results']").click()
         wait.until(lambda d: "Road graph" in d.find_element(By.TAG_NAME, "body").text)
+        driver.find_element(By.XPATH, "//*[normalize-space(text())='Road graph']").click()
+        wait.until(lambda d: "map" in d.find_element(By.TAG_NAME, "body").text.split())  # the figure's label
         assert console_errors(driver) == []
 
         experiment = _rest(base, "experiments/get-by-name?experiment_name=topoloc")["experiment"]["experiment_id"]
