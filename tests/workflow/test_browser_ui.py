@@ -69,14 +69,14 @@ def mlflow_ui(workflow):
     if reason:
         pytest.skip(reason)
     workflow.run(GRAPH, "--cores", "2")
-    workflow.run("--report", "report.html", GRAPH)
-    model_run = _log_a_model(workflow.root)
-    port = _free_port()
+    port = _free_port()  # the server starts while the report is built and the model logged (it reads the store live)
     server = subprocess.Popen([sys.executable, "-m", "mlflow", "ui", "--backend-store-uri", "sqlite:///results/mlflow.db",
                                "--host", "127.0.0.1", "--port", str(port), "--workers", "1"], cwd=workflow.root,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=clean_env(), start_new_session=True)
     base = f"http://127.0.0.1:{port}"
     try:
+        workflow.run("--report", "report.html", GRAPH)
+        model_run = _log_a_model(workflow.root)
         deadline = time.monotonic() + 120
         while True:
             try:
