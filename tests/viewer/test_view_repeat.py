@@ -32,8 +32,13 @@ def repeat_inputs(tmp_path):
     pd.DataFrame(rows).to_csv(tmp_path / "frames.csv", index=False)
     images = np.random.default_rng(0).integers(0, 255, size=(2, len(repeat), 12, 40, 3), dtype=np.uint8)
     np.savez(tmp_path / "places.npz", images=images, conditions=np.array(["fog", "night"]))
+    pd.DataFrame({"route": 0, "route_start_m": 100.0, "route_length_m": 400.0, "condition": ["night", "night", "fog"],
+                  "agent": ["Topo-LP (ground truth)", "replay (place_loop)", "replay (place_loop)"],
+                  "outcome": ["success", "off_road", "off_road"], "success": [True, False, False],
+                  "progress_m": [400.0, 150.0, 20.0]}).to_csv(tmp_path / "episodes.csv", index=False)
     return {"graph": str(tmp_path / "graph.graphml"), "vertices": str(tmp_path / "vertices.csv"),
-            "frames": str(tmp_path / "frames.csv"), "repeat": str(tmp_path / "places.npz")}
+            "frames": str(tmp_path / "frames.csv"), "repeat": str(tmp_path / "places.npz"),
+            "episodes": str(tmp_path / "episodes.csv")}
 
 
 def test_the_repeat_viewer_shows_each_method_its_vertex_and_the_camera(repeat_inputs, tmp_path):
@@ -50,6 +55,11 @@ def test_the_repeat_viewer_shows_each_method_its_vertex_and_the_camera(repeat_in
     assert len(blob["lines"][0]["latlngs"]) == len(vertices)
     assert len(blob["images"]["src"]) == 15 and all(s.startswith("data:image/jpeg;base64,") for s in blob["images"]["src"])
     assert blob["text"]["text"][0] == "siamese network: vertex 0, command turn_left, error 2.0 m"
+    # route following: the route along the teach route, and where the failed episode of this condition stopped
+    assert blob["lines"][1]["name"] == "route following: route 0 (400 m)" and len(blob["lines"][1]["latlngs"]) == 81
+    fails = [m for m in blob["marks"] if m["kind"] == "fail"]
+    assert len(fails) == 1 and fails[0]["label"] == "replay (place_loop): off_road after 150 m of route 0"
+    assert [fails[0]["lat"], fails[0]["lon"]] == blob["lines"][0]["latlngs"][50]  # s = 100 + 150 m: vertex 50
     assert blob["time"]["t_s"] is None and blob["truth"][0][0] == pytest.approx(60.15, abs=0.01)
 
 

@@ -5,7 +5,10 @@ command), ``frames`` (``localize_repeat``: per condition, method and repeat fram
 ``repeat`` (``render_places``' repeat ``places.npz``: the camera images). One repeat condition is shown
 (``viewer.condition``, default the first): the topometric map and the repeat track as lines, each method's
 localization (its vertex's position) over the slider's frames, the camera frame every ``viewer.image_every`` frames
-(a downscaled JPEG) and the command of the localized vertex. Output: ``html``.
+(a downscaled JPEG) and the command of the localized vertex. With ``episodes`` (``follow_route``'s
+``episodes.csv``, optional) also route following in closed loop: each evaluation route along the teach route, and
+where each episode of the shown condition that failed stopped (its progress along the route; ``follow_route`` keeps
+no trajectory, so the vehicle itself is not replayed). Output: ``html``.
 """
 
 from __future__ import annotations
@@ -43,6 +46,30 @@ def _table(path: str, columns: set[str], what: str) -> pd.DataFrame:
     if missing:
         raise InputError(path, f"not the {what} (no {sorted(missing)[0]!r} column)")
     return table
+
+
+def add_episodes(data: ViewerData, path: str, vertices: pd.DataFrame, condition: str, row_m: np.ndarray,
+                 latlon: Any) -> None:
+    """Route following: the routes as lines, a ``fail`` mark where each failed episode of ``condition`` stopped."""
+    episodes = _table(path, {"route", "route_start_m", "route_length_m", "condition", "agent", "outcome", "success",
+                             "progress_m"}, "follow_route episodes table")
+    s, xy = vertices.s.to_numpy(float), vertices[["gt_x", "gt_y"]].to_numpy(float)
+    for route, group in episodes.groupby("route"):
+        start, length = float(group.route_start_m.iat[0]), float(group.route_length_m.iat[0])
+        on = (s >= start) & (s <= start + length)
+        if on.sum() >= 2:
+            data.lines.append({"name": f"route following: route {route} ({length:.0f} m)", "color": "#2ca02c",
+                               "latlngs": latlon(xy[on])})
+    shown = episodes[episodes.condition.astype(str) == condition]
+    for e in shown[~shown.success.astype(str).str.lower().eq("true")].itertuples():
+        at = float(e.route_start_m) + float(e.progress_m)
+        where = xy[int(np.argmin(np.abs(s - at)))]
+        data.marks.append({"kind": "fail", "name": str(e.agent), "idx": int(np.argmin(np.abs(row_m - at))),
+                           "lat": latlon(where)[0][0], "lon": latlon(where)[0][1],
+                           "label": f"{e.agent}: {e.outcome} after {float(e.progress_m):.0f} m of route {e.route}"})
+    ok = int(shown.success.astype(str).str.lower().eq("true").sum())
+    data.notes.append(f"Route following ({condition}): {ok} of {len(shown)} episodes reached the end; red rings: "
+                      "where the others stopped.")
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
@@ -87,6 +114,8 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
             data.text = {"idx": row_of[keep].tolist(),
                          "text": [f"{method}: vertex {v}, command {command.get(v, '?')}, error {e:.1f} m" if v >= 0
                                   else f"{method}: not localized" for v, e in zip(vertex, error)]}
+    if inputs.get("episodes"):
+        add_episodes(data, inputs["episodes"], vertices, condition, driven[rows], latlon)
     npz = np.load(inputs["repeat"])
     images = npz["images"]
     names = [str(c) for c in npz["conditions"]] if "conditions" in npz.files else conditions

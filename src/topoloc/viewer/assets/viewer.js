@@ -91,7 +91,7 @@
     L.circleMarker([m.lat, m.lon], { radius: m.kind === "start" ? 4 : 7, color, weight: 2, fill: m.kind !== "start",
       fillColor: "#fff", fillOpacity: 0.9 }).bindTooltip(m.label).on("click", () => setRow(m.idx)).addTo(marks);
   });
-  if (D.marks && D.marks.length) overlays["starts and where each became sure"] = marks;
+  if (D.marks && D.marks.length) overlays["events: starts, where each became sure, failures"] = marks;
   L.control.layers(null, overlays, { collapsed: false }).addTo(map);
 
   /* ---- the confidence chart over metres driven ---- */
