@@ -17,6 +17,8 @@ rule view_drive:
             category="Viewer",
             labels={"region": "{region}", "drive": "{drive}", "figure": "interactive viewer"},
         ),
+    wildcard_constraints:
+        drive="|".join(re.escape(d) for d in DRIVES),  # the configured drives only (not teach_repeat.html)
     params:
         conf=lambda wildcards: {k: config[k] for k in ("localization", "segmentation", "encoding", "viewer")}
         | {"drive": wildcards.drive, "region": config["region"]["name"]},
