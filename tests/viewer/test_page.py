@@ -69,3 +69,17 @@ def test_the_belief_shrinks_onto_the_true_road(small_viewer):
 def test_nothing_to_draw_is_a_clear_error():
     with pytest.raises(InputError, match="nothing to draw"):
         render_html(None, ViewerData(title="empty", time={"frame": [0], "driven_m": [0.0], "t_s": [0.0]}))
+
+
+def test_the_assets_digest_follows_the_assets(tmp_path, monkeypatch):
+    import shutil
+
+    import topoloc.viewer.page as page
+
+    copy = tmp_path / "assets"
+    shutil.copytree(page.ASSETS, copy)
+    monkeypatch.setattr(page, "ASSETS", copy)
+    before = page.assets_digest()
+    assert before == page.assets_digest() and len(before) == 64
+    (copy / "viewer.js").write_text((copy / "viewer.js").read_text() + "\n// edited\n")
+    assert page.assets_digest() != before

@@ -1,4 +1,7 @@
 # The interactive viewers: one offline HTML file per drive, and one of teach and repeat (topoloc.viewer).
+from topoloc.viewer.page import assets_digest
+
+VIEWER_ASSETS = assets_digest()  # viewer.js & co. are not Python: their digest joins each rule's code digest
 
 
 rule view_drive:
@@ -22,7 +25,7 @@ rule view_drive:
     params:
         conf=lambda wildcards: {k: config[k] for k in ("localization", "segmentation", "encoding", "viewer")}
         | {"drive": wildcards.drive, "region": config["region"]["name"]},
-        code=code("topoloc.viewer.view_drive"),
+        code=code("topoloc.viewer.view_drive") + VIEWER_ASSETS,
     log:
         "results/{region}/logs/view_drive_{drive}.log",
     benchmark:
@@ -49,7 +52,7 @@ rule view_repeat:
         ),
     params:
         conf={"viewer": config["viewer"], "region": config["region"]["name"]},
-        code=code("topoloc.viewer.view_repeat"),
+        code=code("topoloc.viewer.view_repeat") + VIEWER_ASSETS,
     log:
         "results/{region}/logs/view_repeat.log",
     benchmark:
@@ -68,7 +71,7 @@ rule view_city:
     params:
         conf={k: config[k] for k in ("localization", "segmentation", "encoding", "graph", "viewer")}
         | {"city": EXPERIMENTS["city"]},
-        code=code("topoloc.viewer.view_city"),
+        code=code("topoloc.viewer.view_city") + VIEWER_ASSETS,
     log:
         "results/{region}/logs/view_city.log",
     benchmark:

@@ -8,6 +8,7 @@ option (``viewer.tiles``). The data is one JSON block (see :class:`ViewerData`) 
 
 from __future__ import annotations
 
+import hashlib
 import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -112,6 +113,15 @@ def road_features(graph: RoadGraph, latlon: LatLon) -> dict[str, Any]:
                          "properties": {"edge_id": e, "name": "" if not isinstance(name, str) else name,
                                         "highway": str(graph.edges["highway"].iat[e])}})
     return {"type": "FeatureCollection", "features": features}
+
+
+def assets_digest() -> str:
+    """sha256 of the inlined assets (Leaflet, the heat layer, the viewer's script and styles): a rule param, so that
+    an edit of ``viewer.js`` reruns the viewers like an edit of their Python code."""
+    digest = hashlib.sha256()
+    for path in sorted(ASSETS.iterdir()):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()
 
 
 def _asset(name: str) -> str:
