@@ -228,3 +228,20 @@ def test_a_mirror_drive_prints_both_places(capsys, tmp_path):
     last = pd.read_csv(tmp_path / "m.csv").iloc[-1]
     assert last.confidence < 0.9 and {int(last.place1_state), int(last.place2_state)} == {0, 3}
     assert "not sure yet" in out and "top places now: 1. road" in out and "2. road" in out
+
+
+def test_html_writes_the_viewer_of_the_drive(small_map, capsys):
+    import re
+
+    tmp, route_edges = small_map
+    code, out, err = run_cli(capsys, "--graph", tmp / "graph.graphml", "--poses", tmp / "poses.txt", "--gps", tmp / "gps.csv",
+                             "--out", tmp / "viewed", "--decoder", "metric,hmm", "--html", tmp / "viewed.html")
+    assert code == 0, err
+    assert "viewed.html" in out
+    html = (tmp / "viewed.html").read_text(encoding="utf-8")
+    blob = json.loads(re.search(r'id="topoloc-data">(.*?)</script>', html, re.S).group(1).replace("<\\/", "</"))
+    assert [a["name"] for a in blob["agents"]] == ["metric", "hmm"]
+    table = pd.read_csv(tmp / "viewed.csv")
+    assert blob["agents"][0]["edge"] == table[table.localizer == "metric"].edge.tolist()
+    assert blob["truth"] is not None and len(blob["truth"]) == len(blob["time"]["frame"])  # the georeferenced track
+    assert blob["belief"]["roads"][-1][0][0] == route_edges[-1]  # the belief ends on the route's last road

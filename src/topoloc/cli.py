@@ -4,7 +4,7 @@
 
     topoloc localize --graph results/kitti00/graph/graph.graphml --poses poses.txt \\
         [--decoder metric] [--model results/kitti00/model/model.ckpt] [--gps gps.csv | --origin LAT,LON,HEADING] \\
-        --out drive
+        --out drive [--html drive.html]
 
 runs one or more localizers (``--decoder``, comma-separated registry names: ``metric``, the default, needs no
 model; ``hmm`` neither; ``raw``, ``strategy1``, ``strategy2`` need the trajectory model) on the drive and
@@ -12,8 +12,10 @@ writes ``drive.csv`` (per localizer and update: frame, metres driven, the answer
 position in the graph's CRS and as lat/lon where the localizer gives one, the traced-back path, and the answer's
 top places ``place<i>_state``, ``_prob``, ``_x``, ``_y``: ``localization.places``) and
 ``drive.geojson`` (the first localizer's run in WGS84: roads of its path, its positions, and the track
-when georeferenced). It prints where the vehicle is at the end and since when the answer is sure, and the top
-places at the end where there are several (a drive two places explain equally names both). A
+when georeferenced); with ``--html`` also the interactive viewer of the drive (:mod:`topoloc.viewer`: every
+localizer's answers over a time slider, the metric filter's belief, the georeferenced track). It prints where the
+vehicle is at the end and since when the answer is sure, and the top places at the end where there are several (a
+drive two places explain equally names both). A
 georeference (``--gps``, ``--origin``) is optional: it only checks that the drive lies on the map. The
 model is a checkpoint path, an MLflow model URI (``runs:/<id>/model``) or the run id of a ``train_rnn``
 stage. Bad input ends with one line: ``topoloc: <file or option>: <what is wrong>``.
@@ -44,14 +46,17 @@ from topoloc.motion.poses import Odometry
 from topoloc.motion.poses import planar_yaw, read_gps, read_poses
 from topoloc.registry import check_names, make, registry
 from topoloc.trajectory.model import load_model
+from topoloc.viewer.drive_view import drive_data
+from topoloc.viewer.page import write_viewer
 
 log = logging.getLogger("topoloc")
 
 
 def load_conf(path: str | None, overrides: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The pipeline config of ``path`` (or the schema defaults) with ``overrides``, validated: the slices a localizer reads."""
+    """The pipeline config of ``path`` (or the schema defaults) with ``overrides``, validated: the slices a localizer
+    (and the viewer) reads."""
     conf = load(path, overrides)
-    return {k: conf[k] for k in ("localization", "segmentation", "encoding")}
+    return {k: conf[k] for k in ("localization", "segmentation", "encoding", "viewer")}
 
 
 def _georeference(args: argparse.Namespace, track: np.ndarray, yaw0: float, crs: str):
@@ -97,16 +102,17 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     model = load_model(args.model, args.tracking_uri) if needs_model else None
     road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], conf["localization"]["decode"]["max_skip_m"], model)
     to_lonlat = pyproj.Transformer.from_crs(graph.crs, "EPSG:4326", always_xy=True)
+    loc_conf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
     tables, seconds = [], {}
     for name in names:
         localizer = make(name)
-        observations = localizer.observe(odometry, road, conf)
+        observations = localizer.observe(odometry, road, loc_conf)
         if len(observations) == 0:
             raise InputError(args.poses, f"empty trajectory: the drive covers {odometry.driven_m[-1]:.1f} m, too little for "
                                          f"any observation of {name} (one virtual-node spacing is "
                                          f"{graph.virtual_node_spacing_m:g} m)")
         began = time.process_time()
-        localizer.reset(road, conf)
+        localizer.reset(road, loc_conf)
         track = localizer.run(observations.items)
         seconds[name] = time.process_time() - began
         if geo is None and hasattr(localizer, "explained"):  # without a georeference: does the map explain the turns?
@@ -124,6 +130,10 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
         table.to_csv(tmp, index=False, float_format="%.7g")
     first = table[table.localizer == names[0]]
     write_geojson(geojson_path, graph, first, names[0], track_xy)
+    if args.html:
+        answers = table.rename(columns={"edge": "state"})
+        data = drive_data(f"topoloc localize: {Path(args.poses).name}", graph, odometry, answers, conf, track_xy)
+        write_viewer(args.html, graph, data, conf["viewer"]["tiles"])
     final = first.iloc[-1]
     sure = first.confidence.to_numpy() >= (args.sure if args.sure is not None else conf["localization"]["evaluate"]["sure"])
     places = []
@@ -139,7 +149,7 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
             "name_now": str(graph.edges["name"].iat[int(final.edge)]) if final.edge >= 0 else "",
             "confidence_now": float(final.confidence), "lat": float(final.lat), "lon": float(final.lon),
             "sure_since_m": since, "places_now": places, "seconds": {k: round(v, 4) for k, v in seconds.items()},
-            "csv": str(csv_path), "geojson": str(geojson_path)}
+            "csv": str(csv_path), "geojson": str(geojson_path), "html": args.html}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -157,6 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     geo.add_argument("--gps", help="optional georeference: per-frame GPS CSV frame,lat,lon[,alt]")
     geo.add_argument("--origin", help="optional georeference: LAT,LON,HEADING_DEG of frame 0 (heading clockwise from north)")
     loc.add_argument("--out", required=True, help="output prefix: writes PREFIX.csv and PREFIX.geojson")
+    loc.add_argument("--html", help="also write the interactive viewer of the drive to this HTML file (offline, self-contained)")
     loc.add_argument("--k", type=int, default=None, help="hypotheses kept per step by Strategy 1 / 2 (default: localization.decode.k)")
     loc.add_argument("--config", help="pipeline config YAML (its segmentation / encoding / localization keys are used)")
     loc.add_argument("--tracking-uri", help="MLflow store for run ids (default: MLFLOW_TRACKING_URI or results/mlflow.db)")
@@ -177,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
                      + (f" at {s['lat']:.6f}, {s['lon']:.6f}" if np.isfinite(s["lat"]) else ""))
             sure = f"sure since {s['sure_since_m']:.0f} m" if s["sure_since_m"] is not None else "not sure yet"
             print(f"topoloc localize: {s['label']}, {s['updates']} updates: {where}, confidence {s['confidence_now']:.2f}, "
-                  f"{sure}; wrote {s['csv']} and {s['geojson']}")
+                  f"{sure}; wrote {s['csv']}, {s['geojson']}" + (f" and {s['html']}" if s["html"] else ""))
             if len(s["places_now"]) > 1:  # where else it may be: the top places, most probable first
                 print("top places now: " + "; ".join(
                     f"{i}. road {p['edge']} ({p['probability']:.2f})" + (f" at {p['lat']:.6f}, {p['lon']:.6f}" if np.isfinite(p["lat"]) else "")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-EXPERIMENT_RULES = {"localize_simulated", "summarize_simulated", "localize_city", "summarize_city", "ablate_rnn",
+EXPERIMENT_RULES = {"localize_simulated", "summarize_simulated", "localize_city", "summarize_city", "view_city", "ablate_rnn",
                     "ablate_rnn_baseline", "summarize_rnn_ablation", "train_controller_seed", "follow_route_seed",
                     "check_controller_seed", "summarize_drive_seeds"}
 
@@ -20,7 +20,7 @@ def test_each_experiment_plans_one_job_per_level_variant_or_seed(workflow):
     assert workflow.planned("experiment_simulated", "--configfile", maps) == {
         "localize_simulated": 3, "summarize_simulated": 1, "experiment_simulated": 1}
     assert workflow.planned("experiment_city", "--configfile", maps) == {
-        "localize_city": 2, "summarize_city": 1, "experiment_city": 1}
+        "localize_city": 2, "summarize_city": 1, "view_city": 1, "experiment_city": 1}
     missing = workflow.run("-n", "experiment_city", check=False)  # the maps beside the checkout are not here
     assert missing.returncode != 0 and "heidelberg.osm.pbf" in missing.stderr + missing.stdout
     ablation = workflow.planned("experiment_rnn_ablation")

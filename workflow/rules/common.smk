@@ -106,6 +106,9 @@ def all_outputs():
         *expand(rules.render_places.output, region=REGION,
                 split=["teach", "repeat"] + (["train"] if config["place"]["model_from"] is None else [])),
         *expand(rules.follow_route.output, region=REGION),
+        # the viewers (viewer.smk, included after localization.smk, whose report_html calls this function)
+        *expand("results/{region}/viewer/{drive}.html", region=REGION, drive=DRIVES),
+        *expand("results/{region}/viewer/teach_repeat.html", region=REGION),
     ]
 
 

@@ -93,9 +93,10 @@ rule summarize_city:
 
 
 rule experiment_city:
-    """Target: the city-scale experiment."""
+    """Target: the city-scale experiment, and its viewers (viewer.smk)."""
     input:
         expand(rules.summarize_city.output, region=REGION),
+        expand(rules.view_city.output, region=REGION),
 
 
 rule ablate_rnn:
