@@ -22,7 +22,7 @@ The **junction benchmark** (:mod:`topoloc.drive.junctions`): every junction of e
 agent and localization and for the expert's own drives (``expert (ground truth)``: the same starts, under each
 condition), taken as commanded or not, with its turn class, kind, distance from the previous junction and the speed
 on entry: ``junctions`` (one row per drive and junction), ``junction_figure`` (share taken per turn class and kind) and
-a section of ``table``. ``movie_<agent>``: one repeat drive per agent to watch (:mod:`topoloc.drive.movie`).
+a section of ``table``. ``movie_<agent>`` (optional): one repeat drive per agent to watch (:mod:`topoloc.drive.movie`).
 """
 
 from __future__ import annotations
@@ -110,7 +110,8 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
             seed = int(np.random.SeedSequence([int(drive["seed"]), 59, names["repeat"].index(condition), repeat, k])
                        .generate_state(1)[0])
             want_strip = k == 0 and repeat == 0 and (agent, loc) == strip_method
-            want_movie = k == 0 and repeat == 0 and condition == names["repeat"][0] and loc == movie_loc
+            want_movie = (k == 0 and repeat == 0 and condition == names["repeat"][0] and loc == movie_loc
+                          and f"movie_{agent}" in outputs)
             episode = run_episode(sim, agents[agent](), locs[loc](), topo, condition, seed, conf,
                                   int(follow["strip_frames"]) if want_strip else 0, None if agent == "expert" else limit,
                                   movie_every if want_movie else 0)
