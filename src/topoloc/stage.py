@@ -22,7 +22,7 @@ from topoloc.tracking import StageRun
 StageFunction = Callable[[dict[str, Any], dict[str, str], dict[str, str]], Mapping[str, float] | None]
 
 #: Output files that are attached to the stage's MLflow run.
-ARTIFACT_SUFFIXES = {".json", ".png", ".md", ".csv", ".graphml", ".html", ".yaml"}
+ARTIFACT_SUFFIXES = {".json", ".png", ".md", ".csv", ".graphml", ".html", ".yaml", ".gif"}
 MAX_ARTIFACT_BYTES = 50 * 2**20
 
 log = logging.getLogger("topoloc")

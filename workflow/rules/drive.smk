@@ -96,6 +96,19 @@ rule follow_route:
             category="Route following",
             labels={"region": "{region}", "figure": "frame strip"},
         ),
+        junctions="results/{region}/drive/follow/junctions.csv",
+        junction_figure=report(
+            "results/{region}/drive/follow/junctions.png",
+            caption="../report/drive_junctions.rst",
+            category="Route following",
+            labels={"region": "{region}", "figure": "junctions taken"},
+        ),
+        **{f"movie_{a}": report(
+            f"results/{{region}}/drive/follow/drive_{a}.gif",
+            caption="../report/drive_movie.rst",
+            category="Route following",
+            labels={"region": "{region}", "figure": f"drive of {a}"},
+        ) for a in config["drive"]["follow"]["agents"]},
     params:
         conf=drive_conf(("seed", "threads", "camera", "vehicle", "episode", "lane", "expert", "demonstrations", "follow"),
                         ("route", "image", "command", "teach_condition", "repeat_conditions", "odometry_noise", "localize")),

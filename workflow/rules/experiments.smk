@@ -213,6 +213,8 @@ rule follow_route_seed:
         paths=f"{SEED_DIR}/follow/paths.png",
         success=f"{SEED_DIR}/follow/success.png",
         strip=f"{SEED_DIR}/follow/strip.png",
+        junctions=f"{SEED_DIR}/follow/junctions.csv",
+        junction_figure=f"{SEED_DIR}/follow/junctions.png",
     wildcard_constraints:
         seed=r"[0-9]+",
     params:

@@ -1,7 +1,8 @@
 """The agents at the wheel of a repeat drive, each told the vertex it is localized at on the map:
 :class:`DLMAgent` (Topo-DLM: the image, the speed and the vertex's command), :class:`LPAgent` (Topo-LP: the image,
 the speed and the local path of the map from the vertex) and :class:`ReplayAgent` (the paper's baseline: the
-steering the expert used at that vertex in the teach drive, and its target speed there)."""
+steering the expert used at that vertex in the teach drive, and its target speed there); :class:`ExpertAgent` (the
+expert itself, which sees the true state: the ceiling of the junction benchmark)."""
 
 from __future__ import annotations
 
@@ -11,8 +12,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from topoloc.drive.controller import AGENT_NAMES
+from topoloc.drive.expert import Expert
 from topoloc.drive.local_path import map_path, path_plane
-from topoloc.drive.simulator import Control
+from topoloc.drive.simulator import Control, Simulator
 from topoloc.place.topometric_map import TopometricMap
 
 
@@ -53,6 +55,19 @@ class ReplayAgent:
 
     def act(self, image: NDArray[np.uint8], speed: float, vertex: int) -> Control:
         return Control(float(self.steer[vertex]), float(np.clip(self.gain * (self.speed[vertex] - speed), -1, 1)))
+
+
+class ExpertAgent:
+    """The expert driving ``sim``'s route from the vehicle's true state (it ignores the image and the vertex)."""
+
+    name = "expert"
+
+    def __init__(self, expert: Expert, sim: Simulator) -> None:
+        self.expert, self.sim = expert, sim
+        expert.reset()
+
+    def act(self, image: NDArray[np.uint8], speed: float, vertex: int) -> Control:
+        return self.expert.control(self.sim.state)
 
 
 def method_name(agent: str, localization: str) -> str:

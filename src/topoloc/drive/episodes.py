@@ -10,7 +10,8 @@ drive it is held to.
   controllers predict their target speed from the image, and at 6 m/s a 5 m radius junction turn is taken too fast;
   the map knows the teach drive slowed there.
 
-:func:`run_episode` drives one repeat and returns its outcome, path, localization errors and timing.
+:func:`run_episode` drives one repeat and returns its outcome, path, progress and speed per step, localization errors,
+timing and, when asked, frames for a strip or a movie of the drive.
 """
 
 from __future__ import annotations
@@ -52,7 +53,8 @@ def teach_controls(sim: Simulator, expert: Expert, condition: str, seed: int,
 
 @dataclass
 class Episode:
-    """One repeat drive: outcome, steps, progress (m), path of the vehicle, localization errors, timing, frames."""
+    """One repeat drive: outcome, steps, progress (m), path of the vehicle, localization errors, timing, frames; per
+    step its progress ``s`` along the lane (m) and ``speed`` (m/s); ``movie``: every few steps a :class:`MovieFrame`."""
 
     outcome: str
     steps: int
@@ -63,12 +65,32 @@ class Episode:
     seconds: float
     mean_abs_lateral_m: float
     frames: list[tuple[NDArray[np.uint8], str]] = field(default_factory=list)
+    s: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    speed: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    movie: list[MovieFrame] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class MovieFrame:
+    """One frame of a drive's movie: the camera image, the vehicle's position and heading, the localized vertex, the
+    command there, the steering and speed, and the time (s)."""
+
+    image: NDArray[np.uint8]
+    xy: NDArray[np.float64]
+    yaw: float
+    vertex: int
+    command: str
+    steer: float
+    speed: float
+    t: float
 
 
 def run_episode(sim: Simulator, agent: Any, localization: Any, topo: TopometricMap, condition: str, seed: int,
-                conf: dict[str, Any], strip_frames: int = 0, speed_limit: NDArray[np.float64] | None = None) -> Episode:
+                conf: dict[str, Any], strip_frames: int = 0, speed_limit: NDArray[np.float64] | None = None,
+                movie_every: int = 0) -> Episode:
     """Drive one repeat of ``sim``'s route under ``condition`` (``conf``: the ``drive`` and ``place`` slices;
-    ``speed_limit``: m/s per map vertex, :func:`speed_limit_ahead`)."""
+    ``speed_limit``: m/s per map vertex, :func:`speed_limit_ahead`; ``movie_every``: a movie frame every that many
+    steps, none at 0)."""
     drive, place = conf["drive"], conf["place"]
     follow, noise = drive["follow"], place["odometry_noise"]
     rng = np.random.default_rng([seed, 53])
@@ -83,6 +105,7 @@ def run_episode(sim: Simulator, agent: Any, localization: Any, topo: TopometricM
     expected = sim.route.length_m / float(drive["expert"]["cruise_mps"]) * sim.spec.control_hz  # steps at cruise speed
     every = max(1, int(expected // strip_frames)) if strip_frames else 0
     xy, errors, frames, since_sure, slow_steps, lat = [sim.centre], [], [], 0, 0, []
+    s_trace, speed_trace, movie = [sim.s], [sim.state.v], []
     previous, status = sim.centre, RUNNING
     started = time.perf_counter()
     while status == RUNNING:
@@ -104,11 +127,17 @@ def run_episode(sim: Simulator, agent: Any, localization: Any, topo: TopometricM
         if every and sim.t % every == 0 and len(frames) < strip_frames:
             frames.append((obs.image, (f"t={sim.t / sim.spec.control_hz:.0f}s {COMMANDS[int(topo.command[vertex])]} "
                                       f"{control.steer:+.2f}")))
+        if movie_every and sim.t % movie_every == 0:
+            movie.append(MovieFrame(obs.image, sim.centre, float(sim.state.yaw), int(vertex),
+                                    COMMANDS[int(topo.command[vertex])], float(control.steer), float(obs.speed),
+                                    sim.t / sim.spec.control_hz))
         obs, status = sim.step(control)
         xy.append(sim.centre)
+        s_trace.append(sim.s)
+        speed_trace.append(sim.state.v)
         lat.append(abs(sim.lateral))
         if obs is None:
             break
     seconds = time.perf_counter() - started
     return Episode(status, sim.t, sim.s, np.asarray(xy), np.asarray(errors), slow_steps, seconds,
-                   float(np.mean(lat)) if lat else 0.0, frames)
+                   float(np.mean(lat)) if lat else 0.0, frames, np.asarray(s_trace), np.asarray(speed_trace), movie)

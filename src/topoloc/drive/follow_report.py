@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from topoloc.drive.plot import frame_grid, paths_figure, success_figure
+from topoloc.drive.junctions import KINDS, NOT_REACHED, TAKEN, TURNS, junction_rates
+from topoloc.drive.plot import frame_grid, junction_figure, paths_figure, success_figure
 from topoloc.drive.repeat_routes import RepeatRoute
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
@@ -27,11 +28,39 @@ def route_table(episodes: pd.DataFrame) -> str:
                                    for agent in dict.fromkeys(episodes.agent)])
 
 
+def _short(agent: str) -> str:
+    """The metric name prefix of a table row, e.g. ``lp_place_loop`` for "Topo-LP (place_loop)"."""
+    return agent.lower().replace("topo-", "").replace(" (", "_").replace(")", "").replace(" ", "_")
+
+
+def _rate_table(table: pd.DataFrame, header: str) -> str:
+    """Markdown of a :func:`~topoloc.drive.junctions.junction_rates` frame: "share (reached)" per cell."""
+    rate, reached = table["rate"], table["reached"]
+    rows = [[agent, *[f"{rate.at[agent, c]:.2f} ({int(reached.at[agent, c])})" if reached.at[agent, c] == reached.at[agent, c]
+                      else "-" for c in rate.columns]] for agent in rate.index]
+    return markdown_table([header, *rate.columns], rows)
+
+
+def junction_section(junctions: pd.DataFrame) -> tuple[list[str], dict[str, pd.DataFrame]]:
+    """The markdown section of the junction benchmark and its rate tables by turn class and by kind."""
+    rates = {"turn": junction_rates(junctions, "turn", TURNS), "kind": junction_rates(junctions, "kind", KINDS)}
+    routes = junctions.drop_duplicates(["route", "junction"])
+    text = ["## Junctions taken as commanded", "",
+            (f"{len(routes)} junction(s) on the route(s) ({', '.join(f'{n} {k}' for k, n in routes.kind.value_counts().items())}); "
+             "per agent the share of the junctions reached that the drive took as commanded (got past without leaving "
+             "the route's roads), and in brackets how many were reached, over all conditions and repeats. "
+             "The expert sees the true state: its failures are the lane's or the vehicle's, not the controller's."), "",
+            "### By turn", "", _rate_table(rates["turn"], "agent (localization)"), "",
+            "### By kind", "", _rate_table(rates["kind"], "agent (localization)"), ""]
+    return text, rates
+
+
 def write_follow_report(episodes: pd.DataFrame, traces: dict[str, np.ndarray], strips: list, parts: list[RepeatRoute],
                         graph: RoadGraph, conf: dict[str, Any], held_out: list[str], outputs: dict[str, str],
-                        strip_title: str) -> dict[str, float]:
+                        strip_title: str, junctions: pd.DataFrame) -> dict[str, float]:
     """Write the outputs of :mod:`topoloc.drive.follow_route` from its drives (episode table, summary, tables, figures
-    and metrics); return the metrics."""
+    and metrics; ``junctions``: the rows of :func:`topoloc.drive.junctions.junction_results` of every drive); return
+    the metrics."""
     follow, place = conf["drive"]["follow"], conf["place"]
     trained = [str(c) for c in conf["drive"]["demonstrations"]["conditions"]]
     summary = (episodes.groupby(["agent", "condition"], sort=False)
@@ -65,6 +94,15 @@ def write_follow_report(episodes: pd.DataFrame, traces: dict[str, np.ndarray], s
         text += [f"## {title}", "", condition_table(summary, "agent", column, held_out, fmt, "agent (localization)"), ""]
     if len(parts) > 1:
         text += ["## Success rate per route (all conditions)", "", route_table(episodes), ""]
+    if len(junctions):
+        section, rates = junction_section(junctions)
+        text += section
+        junction_figure(rates, outputs["junction_figure"])
+    else:
+        text += ["## Junctions taken as commanded", "", "The route(s) pass no junction.", ""]
+        junction_figure({}, outputs["junction_figure"])
+    with atomic_path(outputs["junctions"]) as tmp:
+        junctions.to_csv(tmp, index=False, float_format="%.2f")
     write_text(outputs["table"], "\n".join(text))
     paths_figure(graph, [p.route.xy for p in parts], episodes, traces, outputs["paths"])
     success_figure(summary, outputs["success"], held_out)
@@ -73,12 +111,19 @@ def write_follow_report(episodes: pd.DataFrame, traces: dict[str, np.ndarray], s
     frame_grid(strips, outputs["strip"], strip_title)
     metrics = dict(facts)
     for agent, g in summary.groupby("agent", sort=False):
-        short = agent.lower().replace("topo-", "").replace(" (", "_").replace(")", "").replace(" ", "_")
+        short = _short(agent)
         metrics[f"{short}_success_mean"] = float(g.success_rate.mean())
         metrics[f"{short}_success_min"] = float(g.success_rate.min())
         metrics |= {f"{short}_success_{row.condition}": float(row.success_rate) for row in g.itertuples()}
         if len(parts) > 1:
             per_route = episodes[episodes.agent == agent].groupby("route").success.mean()
             metrics |= {f"{short}_success_route{k}": float(v) for k, v in per_route.items()}
+    if len(junctions):
+        reached = junctions[junctions.result != NOT_REACHED]
+        metrics["junctions"] = float(len(junctions.drop_duplicates(["route", "junction"])))
+        for agent, g in reached.groupby("agent", sort=False):
+            short = _short(agent)
+            metrics[f"{short}_junction_success"] = float((g.result == TAKEN).mean())
+            metrics[f"{short}_junctions_reached"] = float(len(g))
     write_json(outputs["metrics"], metrics)
     return metrics

@@ -17,6 +17,12 @@ and 2: success rate per condition and the mean, held-out conditions of the contr
 routes also per route), ``metrics`` (success per agent and route; ``intersections`` and ``shared_m`` summed over the
 routes, a stretch counted once per route that holds it), ``paths``
 (the driven paths over the map), ``success`` (bars) and ``strip`` (frames of one repeat per condition).
+
+The **junction benchmark** (:mod:`topoloc.drive.junctions`): every junction of every route, for every drive of every
+agent and localization and for the expert's own drives (``expert (ground truth)``: the same starts, under each
+condition), taken as commanded or not, with its turn class, kind, distance from the previous junction and the speed
+on entry: ``junctions`` (one row per drive and junction), ``junction_figure`` (share taken per turn class and kind) and
+a section of ``table``. ``movie_<agent>`` (optional): one repeat drive per agent to watch (:mod:`topoloc.drive.movie`).
 """
 
 from __future__ import annotations
@@ -30,12 +36,14 @@ import pandas as pd
 import torch
 from tqdm import tqdm
 
-from topoloc.drive.agents import DLMAgent, LPAgent, ReplayAgent, method_name
+from topoloc.drive.agents import DLMAgent, ExpertAgent, LPAgent, ReplayAgent, method_name
 from topoloc.drive.camera import image_shape, place_window
 from topoloc.drive.controller import load_controller
 from topoloc.drive.episodes import run_episode, speed_limit_ahead, teach_controls
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.follow_report import write_follow_report
+from topoloc.drive.junctions import junction_results, roundabout_ways, route_junctions
+from topoloc.drive.movie import write_movie
 from topoloc.drive.localization_adapters import GroundTruth, PlaceLocalization
 from topoloc.drive.repeat_routes import intersections, repeat_routes
 from topoloc.drive.routes import make_simulator, teach_route
@@ -75,12 +83,16 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
                                       CONTROLLERS[a]) for a in follow["agents"] if a in CONTROLLERS}
     retrieval = load_model(inputs["model"]) if place_names else None
     ahead = follow["teach_speed_ahead_m"]
-    rows, traces, strips = [], {}, []
+    rows, traces, strips, junction_rows, movies = [], {}, [], [], {}
     strip_method = (next((a for a in ("lp", "dlm") if a in follow["agents"]), follow["agents"][0]),
                     place_names[0] if place_names else "ground_truth")
+    movie_loc, movie_every = place_names[0] if place_names else "ground_truth", int(follow["movie"]["every_steps"])
+    jconf = follow["junctions"]
+    roundabouts = roundabout_ways(inputs.get("osm"))
     runs = [(c, r, a, loc) for c in names["repeat"] for r in range(int(follow["repeats"]))
             for a in follow["agents"] for loc in localizations]
-    progress = tqdm(total=len(parts) * len(runs), desc="repeat drives", unit="drive")
+    expert_runs = [(c, r, "expert", "ground_truth") for c in names["repeat"] for r in range(int(follow["repeats"]))]
+    progress = tqdm(total=len(parts) * (len(runs) + len(expert_runs)), desc="repeat drives", unit="drive")
     for k, part in enumerate(parts):
         route, topo, lane_s = part.route, part.topo, part.lane_s
         sim = make_simulator(inputs.get("osm"), graph, route, conf)
@@ -88,17 +100,31 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         teach_steer, teach_speed = teach_controls(sim, expert, place["teach_condition"], int(drive["seed"]), lane_s)
         limit = None if ahead is None else speed_limit_ahead(teach_speed, lane_s, float(ahead))
         agents = {"dlm": partial(DLMAgent, controllers.get("dlm"), topo), "lp": partial(LPAgent, controllers.get("lp"), topo),
-                  "replay": partial(ReplayAgent, teach_steer, teach_speed, float(drive["expert"]["speed_gain"]))}
+                  "replay": partial(ReplayAgent, teach_steer, teach_speed, float(drive["expert"]["speed_gain"])),
+                  "expert": partial(ExpertAgent, expert, sim)}
+        junctions = route_junctions(graph, route, roundabouts, float(jconf["cluster_m"]), float(jconf["around_m"]))
         locs = {"ground_truth": partial(GroundTruth, lane_s)}
         for name in place_names:
             locs[name] = partial(_place_localization, name, topo, retrieval, place["localize"], place_window(conf))
-        for condition, repeat, agent, loc in runs:
+        for condition, repeat, agent, loc in runs + expert_runs:
             seed = int(np.random.SeedSequence([int(drive["seed"]), 59, names["repeat"].index(condition), repeat, k])
                        .generate_state(1)[0])
             want_strip = k == 0 and repeat == 0 and (agent, loc) == strip_method
+            want_movie = (k == 0 and repeat == 0 and condition == names["repeat"][0] and loc == movie_loc
+                          and f"movie_{agent}" in outputs)
             episode = run_episode(sim, agents[agent](), locs[loc](), topo, condition, seed, conf,
-                                  int(follow["strip_frames"]) if want_strip else 0, limit)
+                                  int(follow["strip_frames"]) if want_strip else 0, None if agent == "expert" else limit,
+                                  movie_every if want_movie else 0)
             key = f"{k}/{condition}/{repeat}/{agent}/{loc}"
+            method = "expert (ground truth)" if agent == "expert" else method_name(agent, loc)
+            junction_rows += [{"episode": key, "route": k, "condition": condition, "repeat": repeat, "agent": method, **j}
+                              for j in junction_results(junctions, episode.s, episode.speed, episode.outcome,
+                                                        float(jconf["before_m"]), float(jconf["after_m"]))]
+            if want_movie and agent != "expert":
+                movies[agent] = (f"{method}, {condition}: {episode.outcome}", episode.movie, route.xy, topo.gt_xy)
+            if agent == "expert":
+                progress.update()
+                continue
             traces[key] = episode.xy
             if want_strip:
                 strips.append((f"{condition}: {episode.outcome}", episode.frames))
@@ -115,5 +141,10 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
             progress.update()
     progress.close()
     episodes = pd.DataFrame(rows)
+    movie = follow["movie"]
+    for agent, (title, frames, lane, vertex_xy) in movies.items():
+        size = write_movie(frames, lane, vertex_xy, title, outputs[f"movie_{agent}"], int(movie["height_px"]),
+                           int(movie["fps"]))
+        log.info("movie of %s: %d frames, %.1f MB", agent, len(frames), size / 1e6)
     return write_follow_report(episodes, traces, strips, parts, graph, conf, held_out, outputs,
-                               f"{method_name(*strip_method)}: one repeat drive per condition")
+                               f"{method_name(*strip_method)}: one repeat drive per condition", pd.DataFrame(junction_rows))

@@ -149,3 +149,31 @@ def success_figure(summary: pd.DataFrame, path: str | Path, held_out: list[str])
     ax.set_title("closed-loop route following per condition")
     fig.tight_layout()
     _save(fig, path)
+
+
+def junction_figure(rates: dict[str, pd.DataFrame], path: str | Path) -> None:
+    """Share of junctions taken as commanded per agent: one panel per grouping (``rates``: title -> the
+    ``rate`` / ``reached`` frame of :func:`topoloc.drive.junctions.junction_rates`), the junctions reached on each bar."""
+    fig, axes = plt.subplots(1, max(1, len(rates)), figsize=(6.5 * max(1, len(rates)), 4.2), squeeze=False)
+    if not rates:
+        axes[0][0].text(0.5, 0.5, "the routes pass no junction", ha="center", va="center")
+        axes[0][0].set_axis_off()
+    for ax, (title, table) in zip(axes[0], rates.items()):
+        rate, reached = table["rate"], table["reached"]
+        groups, agents = list(rate.columns), list(rate.index)
+        width = 0.8 / max(len(agents), 1)
+        x = np.arange(len(groups))
+        for k, agent in enumerate(agents):
+            bars = ax.bar(x + (k - (len(agents) - 1) / 2) * width, rate.loc[agent].fillna(0.0), width, label=agent)
+            for bar, n in zip(bars, reached.loc[agent]):
+                if n == n:  # not NaN: some reached
+                    ax.text(bar.get_x() + bar.get_width() / 2, bar.get_height() + 0.01, f"{int(n)}", ha="center",
+                            fontsize=5)
+        ax.set_xticks(x, groups, fontsize=8)
+        ax.set_ylim(0, 1.1)
+        ax.set_ylabel("share taken as commanded")
+        ax.set_title(f"junctions by {title} (number reached on the bars)")
+    if rates:
+        axes[0][0].legend(fontsize=6)
+    fig.tight_layout()
+    _save(fig, path)
