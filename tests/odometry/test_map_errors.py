@@ -95,7 +95,8 @@ def test_simplified_map_has_fewer_points_within_the_tolerance(grid):
         assert _line(t).hausdorff_distance(_line(m)) <= tol + 1e-6
     assert fewer >= 0.8 * pair.map.num_edges  # the bent truth roads are simplified
     # the truth is curved: its roads leave the chord between their ends by more than the tolerance
-    assert np.median([np.max(shapely.distance(_line(t[[0, -1]]), shapely.points(t))) for t in pair.truth.geometry]) > tol
+    assert np.median([np.max(shapely.distance(_line(t[[0, -1]]), shapely.points(t))) for t in pair.truth.geometry]) > tol / 2
+    assert all(np.allclose(m, b) for m, b in zip(pair.map.geometry, grid.geometry) if len(b) == 2)  # the base's chords
 
 
 def test_dual_carriageway_mapped_as_one_road(grid):

@@ -10,7 +10,7 @@ centreline, drawn per drive from the pair's range; walks respect one-way roads a
 (detours) whenever they pass one:
 
 * ``random``: a random walk (no U-turn except at dead ends);
-* ``out_and_back``: out, a U-turn, back to the start, a U-turn, out again (on a two-way road the U-turn is a half
+* ``out_and_back``: out, a U-turn, back to the start, a U-turn, out again (on two-way roads; the U-turn is a half
   circle across the road); where the truth has a dual carriageway: out on one carriageway, through the median
   opening at its end, back on the other, through the opening at its start, out again: the *mirror walk*, which the
   same loop driven the other way round explains equally well;
@@ -128,11 +128,20 @@ def _out_and_back(pair: MapPair, length_m: float, offset: float, rng: np.random.
         laps = int(np.ceil(length_m / lap)) + 1
         route, froms = lap_route * laps + right, lap_froms * laps + rnodes
         return (*_path(graph, route, froms, offset), route)
-    route, froms = walk(graph, length_m / 3.0, rng)
-    for i in range(1, len(route)):
-        if route[i] == route[i - 1]:  # turned back at a dead end: cut there, the half circles turn
-            route, froms = route[:i], froms[:i]
+    best: tuple[list[int], list[int]] = ([], [])
+    for _ in range(20):  # on two-way roads only (it drives back along them), never back at a dead end
+        route, froms = walk(graph, length_m / 3.0, rng)
+        for i in range(len(route)):
+            if graph.edges.oneway.iat[route[i]] != 0 or i and route[i] == route[i - 1]:
+                route, froms = route[:i], froms[:i]
+                break
+        if sum(graph.edges.length_m.iat[e] for e in route) > sum(graph.edges.length_m.iat[e] for e in best[0]):
+            best = (route, froms)
+        if sum(graph.edges.length_m.iat[e] for e in route) >= 0.8 * length_m / 3.0:
             break
+    route, froms = best
+    if not route:
+        raise ValueError("out_and_back: no two-way road to drive out and back on")
     back_froms = [graph.other_end(e, f) for e, f in zip(route, froms)][::-1]
     legs = [(route, froms), (route[::-1], back_froms)]
     xy, yaw, edge = [], [], []

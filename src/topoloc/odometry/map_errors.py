@@ -11,10 +11,11 @@ Error types (:data:`ERROR_TYPES`) and what a level sets (:data:`LEVELS`; ``none`
 
 * ``lateral``: the map is the truth; the drive keeps to a lane ``lane_offset_m`` right of the centreline (both
   directions), drawn per drive (the other types drive 1.5 m right of it, as :mod:`topoloc.odometry.simulate`).
-* ``displacement``: every map node is moved by up to ``node_m`` (uniform direction and magnitude), the geometry
-  between follows linearly, and every road gets a bend of up to ``curve_m`` (a half sine between its ends).
+* ``displacement``: every node is moved by up to ``node_m`` (uniform direction and magnitude) between map and
+  truth, the geometry between follows linearly, and every road gets a bend of up to ``curve_m`` (a half sine
+  between its ends).
 * ``simplified``: the map's geometry is the truth's simplified by Douglas-Peucker at ``tolerance_m``; truth roads
-  that are straight (two points, >= 40 m) first get an S-bend of 1-2 tolerances, so there is something to
+  that are straight (two points, >= 40 m) get an S-bend of 0.5-1 tolerance first, so there is something to
   simplify.
 * ``dual_as_one``: the truth has ``share`` of its straight chains of two-way roads as dual carriageways (two one-way
   roads ``gap_m`` apart, a median opening at every node), the map has them as one two-way road.
@@ -108,52 +109,56 @@ def _identity(graph: RoadGraph) -> dict[int, list[int]]:
     return {e: [e] for e in range(graph.num_edges)}
 
 
-def make_map_pair(truth: RoadGraph, error: str, level: str, rng: np.random.Generator) -> MapPair:
-    """The (true network, map) pair of ``error`` at ``level`` made from the road network ``truth`` (module docstring).
+def make_map_pair(base: RoadGraph, error: str, level: str, rng: np.random.Generator,
+                  dual: list[tuple[list[int], list[int], list[int]]] | None = None) -> MapPair:
+    """The (true network, map) pair of ``error`` at ``level`` made from the road network ``base`` (module docstring).
 
-    For ``dual_as_one``, ``missing_road`` and ``simplified`` the truth is ``truth`` made richer (dual carriageways,
-    detours, bends) and the map is ``truth`` itself (simplified for ``simplified``); for the others the truth is
-    ``truth`` and the map is made from it."""
+    The map is ``base`` itself (its roads, ids and a model trained on it apply) except for ``two_way_as_dual`` (the
+    map is ``base`` with dual carriageways) and ``simplified`` (``base`` simplified); the truth is ``base`` made
+    different (displaced, bent, with dual carriageways, detours, or roads dropped). ``dual``: the dual carriageways
+    of ``base`` (:func:`dual_carriageway_grid`), kept where the truth has ``base``'s roads."""
     if error not in ERROR_TYPES:
         raise ValueError(f"error must be one of {ERROR_TYPES}, got {error!r}")
     if level not in LEVEL_NAMES:
         raise ValueError(f"level must be one of {LEVEL_NAMES}, got {level!r}")
+    same = list(dual or [])
     if level == "none":
-        return MapPair(truth, copy_graph(truth), error, level, _identity(truth))
+        return MapPair(base, copy_graph(base), error, level, _identity(base), dual=same)
     p = LEVELS[error][level]
     if error == "lateral":
-        return MapPair(truth, copy_graph(truth), error, level, _identity(truth), lane_offset_m=p["lane_offset_m"])
+        return MapPair(base, copy_graph(base), error, level, _identity(base), lane_offset_m=p["lane_offset_m"], dual=same)
     if error == "displacement":
-        return MapPair(truth, displace(truth, p["node_m"], p["curve_m"], rng), error, level, _identity(truth))
-    if error == "simplified":
+        return MapPair(displace(base, p["node_m"], p["curve_m"], rng), copy_graph(base), error, level, _identity(base),
+                       dual=same)
+    if error == "simplified":  # bends within the tolerance: a straight road of base is its own simplification
         tol = p["tolerance_m"]
-        curved = curvy(truth, tol, 2.0 * tol, rng)
-        return MapPair(curved, simplify(curved, tol), error, level, _identity(curved))
+        curved = curvy(base, 0.5 * tol, tol, rng)
+        return MapPair(curved, simplify(curved, tol), error, level, _identity(curved), dual=same)
     if error in ("dual_as_one", "two_way_as_dual"):
-        chains = _pick_chains(truth, p["share"], rng)
-        dual, old_to_new, duals = split_dual(truth, chains, _draw(p["gap_m"], rng, len(chains)))
+        chains = _pick_chains(base, p["share"], rng)
+        split, old_to_new, duals = split_dual(base, chains, _draw(p["gap_m"], rng, len(chains)))
         if error == "dual_as_one":
             back = {new: [old] for old, news in old_to_new.items() for new in news}
             for chain, (_, _, openings) in zip(chains, duals):  # an opening: the map roads at its node
                 for k, opening in enumerate(openings):
                     back[opening] = [e for e, _ in chain[max(0, k - 1): k + 1]]
-            to_map = {e: back.get(e, []) for e in range(dual.num_edges)}
-            return MapPair(dual, copy_graph(truth), error, level, to_map, dual=duals)
-        return MapPair(truth, dual, error, level, old_to_new)
+            to_map = {e: back.get(e, []) for e in range(split.num_edges)}
+            return MapPair(split, copy_graph(base), error, level, to_map, dual=duals)
+        return MapPair(base, split, error, level, old_to_new, dual=same)
     if error == "missing_road":
-        richer, old_to_new, detours = add_detours(truth, p["share"], p["depth_m"], rng)
+        richer, old_to_new, detours = add_detours(base, p["share"], p["depth_m"], rng)
         back = {new: [old] for old, news in old_to_new.items() for new in news}
         to_map = {e: back.get(e, []) for e in range(richer.num_edges)}
-        return MapPair(richer, copy_graph(truth), error, level, to_map, detours=detours)
-    poorer, new_to_old = drop_roads(truth, p["share"], rng)
-    return MapPair(poorer, copy_graph(truth), error, level, {new: [old] for new, old in new_to_old.items()})
+        return MapPair(richer, copy_graph(base), error, level, to_map, detours=detours)
+    poorer, new_to_old = drop_roads(base, p["share"], rng)
+    return MapPair(poorer, copy_graph(base), error, level, {new: [old] for new, old in new_to_old.items()})
 
 
 def dual_carriageway_grid(like: RoadGraph | None = None, length_m: float = 600.0, gap_m: float = 17.0,
                           block_m: tuple[float, ...] = (110.0, 150.0, 90.0, 130.0, 120.0)) -> MapPair:
     """A synthetic map for the mirror walk: a dual carriageway ``gap_m`` wide along a street of blocks ``block_m``
     (summing to about ``length_m``), two-way side streets of 120 m on both sides at each inner node. The pair's map
-    is its truth (error ``none``)."""
+    is its truth (error ``none``); pass its ``dual`` to :func:`make_map_pair` with its truth as the base."""
     xs = np.concatenate([[0.0], np.cumsum(block_m)])
     xs = xs * length_m / xs[-1]
     coords = {i: (float(x), 0.0) for i, x in enumerate(xs)}
