@@ -4,7 +4,7 @@
 roads bent), :func:`curvy` (straight roads given an S-bend), :func:`simplify` (Douglas-Peucker),
 :func:`straight_chains` and :func:`split_dual` (straight chains of two-way roads made dual carriageways),
 :func:`add_detours` (service-road loops), :func:`drop_roads` (roads removed, the graph kept connected) and
-:func:`inner_turn` (how much a road turns within itself).
+:func:`inner_turn` (how much a road turns within itself), :func:`crop_graph` (the roads near the middle).
 """
 
 from __future__ import annotations
@@ -315,3 +315,21 @@ def drop_roads(graph: RoadGraph, share: float, rng: np.random.Generator) -> tupl
     records = records_of(graph)
     return (build_graph(graph.nodes.copy(), [records[e] for e in keep], [graph.geometry[e].copy() for e in keep], graph),
             dict(enumerate(keep)))
+
+
+def crop_graph(graph: RoadGraph, radius_m: float) -> RoadGraph:
+    """The largest connected part of the roads of ``graph`` with both ends within ``radius_m`` of its middle (the
+    median node)."""
+    xy = graph.nodes[["x", "y"]].to_numpy(float)
+    inside = set(graph.nodes.index[np.hypot(*(xy - np.median(xy, axis=0)).T) <= radius_m].tolist())
+    g = nx.MultiGraph()
+    for e in range(graph.num_edges):
+        u, v = int(graph.edges.u.iat[e]), int(graph.edges.v.iat[e])
+        if u in inside and v in inside:
+            g.add_edge(u, v, key=e)
+    if not g.number_of_edges():
+        raise ValueError(f"no road within {radius_m} m of the map's middle")
+    largest = max(nx.connected_components(g), key=len)
+    keep = sorted(k for u, v, k in g.edges(keys=True) if u in largest)
+    records = records_of(graph)
+    return build_graph(graph.nodes.copy(), [records[e] for e in keep], [graph.geometry[e].copy() for e in keep], graph)

@@ -155,9 +155,12 @@ def make_map_pair(base: RoadGraph, error: str, level: str, rng: np.random.Genera
 
 
 def dual_carriageway_grid(like: RoadGraph | None = None, length_m: float = 600.0, gap_m: float = 17.0,
-                          block_m: tuple[float, ...] = (110.0, 150.0, 90.0, 130.0, 120.0)) -> MapPair:
+                          block_m: tuple[float, ...] = (120.0, 150.0, 90.0, 150.0, 120.0)) -> MapPair:
     """A synthetic map for the mirror walk: a dual carriageway ``gap_m`` wide along a street of blocks ``block_m``
-    (summing to about ``length_m``), two-way side streets of 120 m on both sides at each inner node. The pair's map
+    (summing to about ``length_m``), two-way side streets of 120 m on both sides at each inner node. With blocks
+    that read the same both ways (the default) the map is symmetric under a half turn, so the loop out on one
+    carriageway and back on the other is explained equally well from either end: no localizer, nor the oracle,
+    can tell the two apart. The pair's map
     is its truth (error ``none``); pass its ``dual`` to :func:`make_map_pair` with its truth as the base."""
     xs = np.concatenate([[0.0], np.cumsum(block_m)])
     xs = xs * length_m / xs[-1]

@@ -31,8 +31,8 @@ BENCHMARKS = {
     "bench_odometry": "odometry", "bench_render": "odometry", "bench_place": "place", "bench_drive": "route_following",
 }
 #: Experiment (results/{region}/experiments/<name>/summary.md) -> task; any other lands on the pipeline page.
-EXPERIMENTS = {"simulated": "localization", "city": "localization", "rnn_ablation": "trajectory",
-               "drive_seeds": "route_following"}
+EXPERIMENTS = {"simulated": "localization", "map_errors": "localization", "city": "localization",
+               "rnn_ablation": "trajectory", "drive_seeds": "route_following"}
 #: The guide page of each task on the docs site.
 GUIDES = {"localization": "localization.md", "trajectory": "trajectory.md", "odometry": "odometry.md",
           "place": "place.md", "route_following": "route_following.md", "pipeline": "cluster.md"}
