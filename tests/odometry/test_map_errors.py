@@ -112,6 +112,19 @@ def test_dual_carriageway_mapped_as_one_road(grid):
             mid = shapely.points(pair.truth.geometry[r][len(pair.truth.geometry[r]) // 2])
             assert abs(_line(pair.map.geometry[m]).distance(mid) - gap / 2) < 0.5
         assert len(openings) == len(right) + 1
+    # the ground truth on the map: the one road, the true position projected onto it (half the gap and the lane away)
+    on_dual = 0
+    for seed in range(4):
+        sim = drive(pair, "random", 1500.0, LOW, np.random.default_rng(seed))
+        edge, xy = map_truth(pair, sim.edge, sim.gt_xy, sim.gt_yaw)
+        carriageways = {e for r, l_, _ in pair.dual for e in r + l_}
+        idx = np.flatnonzero(np.isin(sim.edge, list(carriageways)) & _inner(sim))
+        on_dual += len(idx)
+        assert all(edge[i] == pair.truth_to_map[sim.edge[i]][0] for i in idx)
+        away = np.hypot(*(xy[idx] - sim.gt_xy[idx]).T)
+        assert np.all((away > 15.0 / 2 + 1.5 - 0.2) & (away < 20.0 / 2 + 1.5 + 0.2))
+        assert all(_line(pair.map.geometry[edge[i]]).distance(shapely.Point(xy[i])) < 1e-6 for i in idx)
+    assert on_dual > 100
 
 
 def test_two_way_road_mapped_as_dual_and_the_truth_on_the_right_carriageway(grid):
