@@ -150,9 +150,10 @@ def table(frame: pd.DataFrame, by: list[str], columns: list[str] | None = None) 
 
 def report(frame: pd.DataFrame, seconds: dict[str, float]) -> str:
     """Markdown tables: per error type, level and localizer; per map; per pattern; the CPU seconds."""
-    cols = ["starts", *FIGURES]
-    parts = ["## Per error type and level\n", table(frame, ["error", "level", "localizer"], cols).to_markdown(index=False, floatfmt=".3f"),
-             "\n## Per map\n", table(frame, ["error", "level", "map", "localizer"], cols).to_markdown(index=False, floatfmt=".3f"),
-             "\n## Per drive pattern\n", table(frame, ["error", "pattern", "localizer"], cols).to_markdown(index=False, floatfmt=".3f"),
+    def md(by: list[str]) -> str:
+        return table(frame, by, ["starts", *FIGURES]).to_markdown(index=False, floatfmt=".3f")
+    parts = ["## Per error type and level\n", md(["error", "level", "localizer"]),
+             "\n## Per map\n", md(["error", "level", "map", "localizer"]),
+             "\n## Per drive pattern\n", md(["error", "pattern", "localizer"]),
              "\nCPU seconds of the localizers (all starts): " + ", ".join(f"{k} {v:.1f}" for k, v in seconds.items())]
     return "\n".join(parts) + "\n"

@@ -258,7 +258,8 @@ def add_detours(graph: RoadGraph, share: float, depth_m: tuple[float, float], rn
     records, geometry = records_of(graph), [c.copy() for c in graph.geometry]
     long_enough = [e for e in range(graph.num_edges) if graph.edges.length_m.iat[e] >= 80.0
                    and graph.edges.u.iat[e] != graph.edges.v.iat[e]]
-    chosen = set(rng.choice(long_enough, size=min(len(long_enough), max(1, round(share * graph.num_edges))), replace=False).tolist()) if long_enough else set()
+    count = min(len(long_enough), max(1, round(share * graph.num_edges)))
+    chosen = set(rng.choice(long_enough, size=count, replace=False).tolist()) if long_enough else set()
     new_records, new_geometry, old_to_new, detours = [], [], {}, set()
     next_id = int(max(graph.nodes.index)) + 1
     for e in range(graph.num_edges):
