@@ -29,6 +29,7 @@ TASKS = {"localization": "Localization", "trajectory": "Trajectory learning", "o
 BENCHMARKS = {
     "bench_localization": "localization", "bench_train": "trajectory", "bench_dataset": "trajectory",
     "bench_odometry": "odometry", "bench_render": "odometry", "bench_place": "place", "bench_drive": "route_following",
+    "bench_map_errors": "localization",
 }
 #: Experiment (results/{region}/experiments/<name>/summary.md) -> task; any other lands on the pipeline page.
 EXPERIMENTS = {"simulated": "localization", "map_errors": "localization", "city": "localization",
