@@ -29,10 +29,11 @@ TASKS = {"localization": "Localization", "trajectory": "Trajectory learning", "o
 BENCHMARKS = {
     "bench_localization": "localization", "bench_train": "trajectory", "bench_dataset": "trajectory",
     "bench_odometry": "odometry", "bench_render": "odometry", "bench_place": "place", "bench_drive": "route_following",
+    "bench_map_errors": "localization",
 }
 #: Experiment (results/{region}/experiments/<name>/summary.md) -> task; any other lands on the pipeline page.
-EXPERIMENTS = {"simulated": "localization", "city": "localization", "rnn_ablation": "trajectory",
-               "drive_seeds": "route_following"}
+EXPERIMENTS = {"simulated": "localization", "map_errors": "localization", "city": "localization",
+               "rnn_ablation": "trajectory", "drive_seeds": "route_following"}
 #: The guide page of each task on the docs site.
 GUIDES = {"localization": "localization.md", "trajectory": "trajectory.md", "odometry": "odometry.md",
           "place": "place.md", "route_following": "route_following.md", "pipeline": "cluster.md"}
