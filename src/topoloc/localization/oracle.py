@@ -146,6 +146,7 @@ class Oracle:
     def straight_back(self, cap: float) -> NDArray[np.float64]:
         """Per state, the longest walk that ends at its end and passes every node straight (capped at ``cap``)."""
         if self._back is None or self._back_cap < cap:
+            cap = max(cap, 5000.0)  # computed once for most drives, not once per start
             length = np.where(self.states.valid, self.states.length, 0.0)
             back = np.minimum(length, cap)
             for _ in range(100_000):  # relax until nothing grows (straight loops stop at the cap)
