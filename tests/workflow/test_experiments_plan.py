@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-EXPERIMENT_RULES = {"localize_simulated", "summarize_simulated", "localize_city", "summarize_city", "view_city", "ablate_rnn",
+EXPERIMENT_RULES = {"localize_simulated", "summarize_simulated", "localize_map_errors", "summarize_map_errors",
+                    "localize_city", "summarize_city", "view_city", "ablate_rnn",
                     "ablate_rnn_baseline", "summarize_rnn_ablation", "train_controller_seed", "follow_route_seed",
                     "check_controller_seed", "summarize_drive_seeds"}
 
@@ -12,7 +13,8 @@ def _local_maps(workflow) -> str:
     for name in ("kitti.osm", "a.osm.pbf", "b.osm.pbf"):
         (workflow.root / name).write_text("")
     return workflow.config("maps.yaml", "experiments:\n  simulated:\n    kitti00_osm: kitti.osm\n"
-                                        "  city:\n    osm: {heidelberg: a.osm.pbf, malta: b.osm.pbf}\n")
+                                        "  city:\n    osm: {heidelberg: a.osm.pbf, malta: b.osm.pbf}\n"
+                                        "  map_errors:\n    osm: {heidelberg: a.osm.pbf, malta: b.osm.pbf}\n")
 
 
 def test_each_experiment_plans_one_job_per_level_variant_or_seed(workflow):
@@ -21,6 +23,10 @@ def test_each_experiment_plans_one_job_per_level_variant_or_seed(workflow):
         "localize_simulated": 3, "summarize_simulated": 1, "experiment_simulated": 1}
     assert workflow.planned("experiment_city", "--configfile", maps) == {
         "localize_city": 2, "summarize_city": 1, "view_city": 1, "experiment_city": 1}
+    map_errors = workflow.planned("experiment_map_errors", "--configfile", maps)
+    assert {k: map_errors[k] for k in ("localize_map_errors", "summarize_map_errors")} == {
+        "localize_map_errors": 8, "summarize_map_errors": 1}  # `none` and the seven error types
+    assert "train_rnn" in map_errors and "build_graph" in map_errors  # the region's map and its RNN
     missing = workflow.run("-n", "experiment_city", check=False)  # the maps beside the checkout are not here
     assert missing.returncode != 0 and "heidelberg.osm.pbf" in missing.stderr + missing.stdout
     ablation = workflow.planned("experiment_rnn_ablation")

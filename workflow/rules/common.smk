@@ -251,6 +251,17 @@ def simulated_inputs(wildcards):
     return inputs | {f"model_{name}": path for name, path in exp["models"].items() if name in exp["maps"]}
 
 
+def map_errors_inputs(wildcards):
+    """The region's road graph and trajectory RNN when the map `region` is a base map; the city maps' OSM files."""
+    exp = EXPERIMENTS["map_errors"]
+    inputs = {f"osm_{name}": exp["osm"][name] for name in exp["maps"] if name in exp["osm"]}
+    if "region" in exp["maps"]:
+        inputs["graph"] = rules.build_graph.output.graph.format(region=wildcards.region)
+        if any(LOCALIZERS[name].requires_model for name in exp["localizers"] if name in LOCALIZERS):
+            inputs["model"] = rules.train_rnn.output.model.format(region=wildcards.region)
+    return inputs
+
+
 #: What a job of the ablation reads of its settings (the drives: those of the config when not named).
 ABLATION_RUN = {"localizers": EXPERIMENTS["rnn_ablation"]["localizers"], "drives": EXPERIMENTS["rnn_ablation"]["drives"] or DRIVES}
 

@@ -1,5 +1,5 @@
 # Experiments: long runs over noise levels, seeds or variants, not part of `rule all`. Run one with
-# `snakemake experiment_<name> --cores N` (simulated, city, rnn_ablation, drive_seeds); settings: experiments.* of
+# `snakemake experiment_<name> --cores N` (simulated, map_errors, city, rnn_ablation, drive_seeds); settings: experiments.* of
 # the config. Each job is one MLflow run; each experiment ends in results/{region}/experiments/<name>/summary.md.
 EXPERIMENT = "results/{region}/experiments"
 LOCALIZATION_KEYS = ("localization", "segmentation", "encoding")
@@ -49,6 +49,53 @@ rule experiment_simulated:
     """Target: the simulated-drives experiment."""
     input:
         expand(rules.summarize_simulated.output, region=REGION),
+
+
+rule localize_map_errors:
+    """Localizers beside the oracle of the map they see, on drives simulated on a true network, one map-error type."""
+    input:
+        unpack(map_errors_inputs),
+    output:
+        starts=f"{EXPERIMENT}/map_errors/{{error}}/starts.csv",
+        figures=f"{EXPERIMENT}/map_errors/{{error}}/figures.md",
+        metrics=f"{EXPERIMENT}/map_errors/{{error}}/metrics.json",
+    wildcard_constraints:
+        error="none|lateral|displacement|simplified|dual_as_one|two_way_as_dual|missing_road|extra_road",
+    params:
+        conf=lambda wildcards: experiment_conf(*LOCALIZATION_KEYS, "graph", map_errors=EXPERIMENTS["map_errors"],
+                                               error=wildcards.error),
+        code=code("topoloc.experiments.map_errors"),
+    log:
+        "results/{region}/logs/localize_map_errors_{error}.log",
+    benchmark:
+        "results/{region}/benchmarks/localize_map_errors_{error}.tsv"
+    script:
+        "../scripts/localize_map_errors.py"
+
+
+rule summarize_map_errors:
+    """The map-error experiment over its error types and levels: summary.md and summary.json."""
+    input:
+        **{f"starts_{error}": f"{EXPERIMENT}/map_errors/{error}/starts.csv"
+           for error in ["none", *EXPERIMENTS["map_errors"]["errors"]]},
+    output:
+        summary=f"{EXPERIMENT}/map_errors/summary.md",
+        json=f"{EXPERIMENT}/map_errors/summary.json",
+    params:
+        conf={"map_errors": EXPERIMENTS["map_errors"]},
+        code=code("topoloc.experiments.map_errors"),
+    log:
+        "results/{region}/logs/summarize_map_errors.log",
+    benchmark:
+        "results/{region}/benchmarks/summarize_map_errors.tsv"
+    script:
+        "../scripts/summarize_map_errors.py"
+
+
+rule experiment_map_errors:
+    """Target: the map-error experiment."""
+    input:
+        expand(rules.summarize_map_errors.output, region=REGION),
 
 
 rule localize_city:

@@ -6,7 +6,7 @@ scored against the truth of the frames they were given at:
 
 * an answer is *right* when it is the true road, or a road that meets the true one at a node the
   vehicle is within ``node_tolerance_m`` of (where the label switches, either road is where the
-  vehicle is);
+  vehicle is); where the vehicle is on no road of the map (true road -1), only "no road" is right;
 * ``localized_m``: metres driven from the start to the first answer that starts a stretch of right
   answers lasting ``confirm_m`` (or to the end of the drive); NaN if never;
 * ``accuracy_after``: share of right answers from there on; ``position_error_m``: the median distance
@@ -82,10 +82,11 @@ class Judge:
         self.tolerance = float(node_tolerance_m)
 
     def right(self, answer: NDArray[np.int64], truth: NDArray[np.int64], xy: NDArray[np.float64]) -> NDArray[np.bool_]:
-        """Per answer: the true road, or a road meeting it at a node within the tolerance of ``xy``."""
+        """Per answer: the true road, or a road meeting it at a node within the tolerance of ``xy``; where the truth is
+        off the map (road -1, :func:`topoloc.odometry.map_error_drives.map_truth`), no road (an answer < 0)."""
         answer, truth = np.asarray(answer, np.int64), np.asarray(truth, np.int64)
-        right = answer == truth
-        near = ~right & (answer >= 0)
+        right = (answer == truth) | ((truth < 0) & (answer < 0))
+        near = ~right & (answer >= 0) & (truth >= 0)
         if near.any() and self.tolerance > 0:
             idx = np.flatnonzero(near)
             a, t = answer[idx], truth[idx]

@@ -30,10 +30,11 @@ BENCHMARKS = {
     "bench_localization": "localization", "bench_real_drives": "localization", "bench_train": "trajectory", "bench_dataset": "trajectory",
     "bench_odometry": "odometry", "bench_render": "odometry", "bench_place": "place", "bench_drive": "route_following",
     "bench_viewer": "localization",
+    "bench_map_errors": "localization", "bench_filter_recovery": "localization",
 }
 #: Experiment (results/{region}/experiments/<name>/summary.md) -> task; any other lands on the pipeline page.
-EXPERIMENTS = {"simulated": "localization", "city": "localization", "rnn_ablation": "trajectory",
-               "drive_seeds": "route_following"}
+EXPERIMENTS = {"simulated": "localization", "map_errors": "localization", "city": "localization",
+               "rnn_ablation": "trajectory", "drive_seeds": "route_following"}
 #: The guide page of each task on the docs site.
 GUIDES = {"localization": "localization.md", "trajectory": "trajectory.md", "odometry": "odometry.md",
           "place": "place.md", "route_following": "route_following.md", "pipeline": "cluster.md"}

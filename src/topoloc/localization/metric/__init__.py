@@ -11,11 +11,14 @@ self-localization", CVPR 2013; PAMI 2016), on our cells (:mod:`topoloc.localizat
   between the odometry frame and the map (a von Mises distribution: mean and concentration), plus
   one *off-map* state for "on no road of this map".
 * **Motion**: a forward step moves every cell ``cell_m`` along the road network (onto every road
-  that may follow at a node, equal shares; one-way roads respected), blurred by ``step_jitter``
+  that may follow at a node; one-way roads respected; with ``branches`` ``walks`` each keeps the whole
+  probability and the filter's total is kept, so every walk is a priori as likely and a road past more side
+  roads is not less likely than a look-alike without them; ``equal``: equal shares), blurred by ``step_jitter``
   (the share that moves zero or two cells: the odometry's scale error); a backward step moves
   along the roads that lead into the cell. Where several cells flow into one, their ``theta``
   beliefs merge (moment matching on the circle); ``theta`` diffuses by ``offset_drift_deg`` per
-  square root of 100 m (heading drift of the odometry and slowly varying map error).
+  square root of 100 m (heading drift of the odometry and slowly varying map error), and by
+  ``node_offset_deg`` more through a node (each road of a real map errs its own way).
 * **Evidence**: the odometry's yaw against the map road's heading at the cell plus ``theta``:
   von Mises with the spread ``heading_sigma_deg`` (plus, on a turn chain, ``turn_sigma_share`` of
   the turn angle at the node, fading out towards the ends of the turn: vehicles round a corner

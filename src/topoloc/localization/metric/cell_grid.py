@@ -175,8 +175,9 @@ class CellGrid:
         """Metres from each cell centre to the nearer end of its directed edge."""
         return np.minimum(self.state_offset, self.states.length[self.state] - self.state_offset)
 
-    def moves(self, distance_m: float) -> Moves:
-        """Where a drive of ``distance_m`` (> 0) from every cell centre lands (see the module docstring)."""
+    def moves(self, distance_m: float, split: bool = True) -> Moves:
+        """Where a drive of ``distance_m`` (> 0) from every cell centre lands (see the module docstring); at a
+        chain's end the weight is split among the chains that follow (``split``), or each keeps it whole."""
         ch = self.chains
         src = np.arange(self.num_cells)
         c = self.chain.copy()
@@ -195,7 +196,7 @@ class CellGrid:
             rep = np.repeat(np.arange(len(c)), counts)
             offset = np.arange(len(rep)) - np.repeat(np.cumsum(counts) - counts, counts)
             nxt = ch.next_idx[ch.next_ptr[c][rep] + offset]
-            src, q, w, c = src[rep], q[rep], w[rep] / counts[rep], nxt
+            src, q, w, c = src[rep], q[rep], (w[rep] / counts[rep] if split else w[rep]), nxt
         if not out:
             empty = np.zeros(0, np.int64)
             return Moves(empty, empty, np.zeros(0))

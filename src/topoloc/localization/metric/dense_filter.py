@@ -85,6 +85,7 @@ class MetricFilter:
         # entries at or below which a filter splits into its scale classes: once the belief holds a few
         # percent of the map, where each split entry costs ``classes`` times as much
         self._split_at = min(self.grid.num_cells // 32, SPLIT_MAX)
+        self._walks = model.settings.branches == "walks"
 
     @property
     def num_cells(self) -> int:
@@ -253,7 +254,7 @@ class MetricFilter:
         weight, resultant = (np.concatenate([part[i] for part in moved.values()]) for i in (1, 2))
         length = np.abs(resultant)
         kappa = concentration(length / np.maximum(weight, TINY))
-        kappa = kappa / (1.0 + kappa * model.drift)  # the offset diffuses: variance 1 / kappa + drift
+        kappa = kappa / (1.0 + kappa * model.drift[cell])  # the offset diffuses: variance 1 / kappa + drift
         mean = np.where(length > 0, resultant / np.maximum(length, TINY), 1.0)
         still = ~movers[self.group]
         self.group, self.cell, self.weight, self.kappa, self.mean = (
@@ -266,9 +267,14 @@ class MetricFilter:
         model = self.model
         self._reenter()
         moves = self._moves()
+        before = np.bincount(self.group // self.classes, weights=self.weight, minlength=self.filters) if self._walks else None
         for move in (1, 2):
             if (moves >= move).any():
                 self._predict(direction, moves >= move)
+        if before is not None:  # every way on from a node kept the whole probability: keep each filter's total
+            filt = self.group // self.classes
+            after = np.bincount(filt, weights=self.weight, minlength=self.filters)
+            self.weight = self.weight * (before / np.maximum(after, TINY))[filt].astype(REAL)
         leave = self.settings.leave_prob
         filt = self.group // self.classes
         self.offmap += leave * np.bincount(filt, weights=self.weight, minlength=self.filters)  # float64 per filter

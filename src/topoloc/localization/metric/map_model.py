@@ -23,6 +23,7 @@ from topoloc.localization.metric.lane_chains import lane_chains
 
 TWO_PI = 2.0 * math.pi
 INT_SETTINGS = ("scale_classes", "coarse_factor", "coarse_min_cells", "coarse_handoff_cells")
+STR_SETTINGS = ("branches",)
 
 
 @dataclass(frozen=True)
@@ -48,16 +49,19 @@ class MetricSettings:
     coarse_min_cells: int = 0
     coarse_handoff_cells: int = 100000
     coarse_spread: float = 1.0
+    branches: str = "equal"
+    node_offset_deg: float = 0.0
 
     @classmethod
     def from_conf(cls, conf: dict) -> MetricSettings:
         """The settings of the validated config slice ``localization.metric``."""
-        return cls(**{k: (int if k in INT_SETTINGS else float)(conf[k]) for k in cls.__dataclass_fields__})
+        return cls(**{k: (str if k in STR_SETTINGS else int if k in INT_SETTINGS else float)(conf[k])
+                      for k in cls.__dataclass_fields__})
 
 
-def _transitions(grid: CellGrid, distance_m: float) -> sp.csr_matrix:
-    """Moves of ``distance_m`` as a CSR matrix with one row per source cell."""
-    moves = grid.moves(distance_m)
+def _transitions(grid: CellGrid, distance_m: float, split: bool = True) -> sp.csr_matrix:
+    """Moves of ``distance_m`` as a CSR matrix with one row per source cell (``split``: see ``CellGrid.moves``)."""
+    moves = grid.moves(distance_m, split)
     n = grid.num_cells
     return sp.csr_matrix((moves.weight, (moves.src, moves.dst)), shape=(n, n))
 
@@ -71,10 +75,11 @@ class MetricModel:
         self.grid = grid = CellGrid(graph, states, chains, settings.cell_m, settings.heading_window_m)
         n = grid.num_cells
         p = settings.step_jitter
-        one = _transitions(grid, settings.cell_m)
-        two = _transitions(grid, 2.0 * settings.cell_m)
+        split = settings.branches == "equal"
+        one = _transitions(grid, settings.cell_m, split)
+        two = _transitions(grid, 2.0 * settings.cell_m, split)
         self.forward = (p * sp.identity(n, format="csr") + (1.0 - 2.0 * p) * one + p * two).tocsr().astype(np.float32)
-        back = one.T.tocsr()  # rows: the cell a backward step starts from; columns: where it came from
+        back = (one if split else _transitions(grid, settings.cell_m)).T.tocsr()  # rows: the cell a backward step starts from; columns: where it came from
         norm = np.asarray(back.sum(axis=1)).ravel()
         self.backward = (sp.diags(1.0 / np.maximum(norm, 1e-12)) @ back).tocsr().astype(np.float32)
         self.forward_cols, self.backward_cols = self.forward.T.tocsr(), self.backward.T.tocsr()
@@ -82,7 +87,11 @@ class MetricModel:
         turning = settings.turn_sigma_share * grid.turn_ramp  # how a vehicle turns varies: the more, the sharper the turn
         self.kappa_obs = (1.0 / (sigma**2 + turning**2)).astype(np.float32)  # von Mises concentration of one observation
         self.unheading = np.exp(-1j * np.radians(grid.heading)).astype(np.complex64)  # e^{-i h}: a yaw into an offset
-        self.drift = float(np.radians(settings.offset_drift_deg) ** 2 * settings.cell_m / 100.0)  # variance per step
+        drift = float(np.radians(settings.offset_drift_deg) ** 2 * settings.cell_m / 100.0)  # variance per step
+        # through a node the offset may jump (each road's map heading errs its own way): spread over the turn chain
+        on_turn = grid.chains.second_state[grid.chain] >= 0
+        cells_of_chain = np.diff(grid.base)[grid.chain]
+        self.drift = (drift + np.where(on_turn, np.radians(settings.node_offset_deg) ** 2 / np.maximum(cells_of_chain, 1), 0.0)).astype(np.float32)
         # off the map the heading is its last value plus the noise of two observations, or anything (a turn)
         self.offmap_kappa = 1.0 / (2.0 * sigma**2)
         self.floor_density = settings.floor / TWO_PI

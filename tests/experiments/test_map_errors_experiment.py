@@ -1,0 +1,80 @@
+"""The map-error experiment on the synthetic maps: one error type's job, and the summary over the jobs."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tests.conftest import make_config
+from topoloc.errors import InputError
+from topoloc.experiments import map_error_starts, map_errors
+from topoloc.experiments.many_starts import targets
+
+
+def _conf(error, **experiment):
+    config = make_config(experiments={"map_errors": experiment})
+    return {**{k: config[k] for k in ("localization", "segmentation", "encoding", "graph")},
+            "map_errors": config["experiments"]["map_errors"], "error": error}
+
+
+@pytest.fixture(scope="module")
+def jobs(tmp_path_factory):
+    """The jobs `none` and `missing_road` (level medium) on dual_grid and grid: hmm from a start every 300 m."""
+    tmp = tmp_path_factory.mktemp("map_errors")
+    inputs = {}
+    for error in ("none", "missing_road"):
+        conf = _conf(error, maps=["dual_grid", "grid"], levels=["medium"], drives=0, localizers=["hmm"],
+                     start_every_m=300.0)
+        outputs = {k: str(tmp / error / f"{k}.{ext}") for k, ext in (("starts", "csv"), ("figures", "md"), ("metrics", "json"))}
+        map_errors.run(conf, {}, outputs)
+        inputs[f"starts_{error}"] = outputs["starts"]
+    return tmp, inputs
+
+
+def test_a_job_per_error_type(jobs):
+    tmp, inputs = jobs
+    frame = pd.read_csv(inputs["starts_missing_road"])
+    assert set(frame.error) == {"missing_road"} and set(frame.level) == {"medium"} and set(frame.localizer) == {"hmm"}
+    drives = list(dict.fromkeys(frame.drive))
+    assert drives[:2] == ["dual_grid/missing_road/medium/00-out_and_back", "dual_grid/missing_road/medium/01-out_and_back"]
+    assert {d.split("-", 1)[1] for d in drives[2:]} <= {"out_and_back", "circle_block", "long_straight"}
+    assert (frame.groupby("drive").start_m.min() == 0).all()
+    assert set(pd.read_csv(inputs["starts_none"]).level) == {"none"}
+    metrics = json.loads((tmp / "missing_road" / "metrics.json").read_text())
+    assert metrics["medium/hmm/starts"] == len(frame)
+    assert metrics["medium/hmm/oracle_resolved"] == pytest.approx(np.isfinite(frame.oracle_m).mean())
+    if np.isfinite(targets(frame)["localized_share"]):
+        assert metrics["medium/hmm/localized_share"] == pytest.approx(targets(frame)["localized_share"])
+    figures = (tmp / "missing_road" / "figures.md").read_text()
+    assert "## Per error type and level" in figures and "## Per drive pattern" in figures
+
+
+def test_the_mirror_walk_is_not_resolved_by_the_oracle(jobs):
+    _, inputs = jobs
+    frame = pd.read_csv(inputs["starts_none"])
+    mirror = frame[frame["map"] == "dual_grid"]
+    assert len(mirror) > 5 and not np.isfinite(mirror.oracle_m).any()
+
+
+def test_summary_per_error_type_and_level(jobs):
+    tmp, inputs = jobs
+    outputs = {"summary": str(tmp / "summary.md"), "json": str(tmp / "summary.json")}
+    conf = _conf("none", maps=["dual_grid", "grid"], levels=["medium"], drives=0, localizers=["hmm"])
+    map_errors.summarize({"map_errors": conf["map_errors"]}, inputs, outputs)
+    text = (tmp / "summary.md").read_text()
+    assert text.startswith("## Map errors: localizers against the oracle of the map they see")
+    assert "missing_road/medium" in text and "none/none" in text
+    data = json.loads((tmp / "summary.json").read_text())
+    assert {j["job"] for j in data["jobs"]} == {"none/none", "missing_road/medium"}
+    frame = pd.read_csv(inputs["starts_missing_road"])
+    job = next(j for j in data["jobs"] if j["job"] == "missing_road/medium")
+    assert job["oracle_resolved"] == pytest.approx(np.isfinite(frame.oracle_m).mean())
+
+
+def test_unknown_map_is_one_clear_error(tmp_path):
+    conf = _conf("none", maps=["atlantis"])
+    with pytest.raises(InputError, match="experiments.map_errors.maps"):
+        map_error_starts.load_base("atlantis", conf, {}, tmp_path)

@@ -1,0 +1,106 @@
+"""The metric filter where the map explains the drive badly: it finds the track again after a stretch off the
+map as fast as a fresh start would, and it does not end sure on a mirror walk."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from localization_helpers import irregular_grid
+from test_oracle import drive_along, dual_carriageway, loop_nodes
+
+from topoloc.config import load
+from topoloc.localization.evaluation import Judge, localized_step
+from topoloc.localization.oracle import Oracle, true_path
+from topoloc.localization.roadmap import RoadMap
+from topoloc.motion.noise import OdometryNoise, integrate_odometry
+from topoloc.motion.poses import Odometry
+from topoloc.odometry.simulate import NOISE_LEVELS, simulate_pattern_drive
+from topoloc.registry import make
+
+
+def conf_slices(**metric):
+    conf = {k: load(None)[k] for k in ("localization", "segmentation", "encoding")}
+    conf["localization"]["metric"].update(metric)
+    return conf
+
+
+def off_map_loop(xy, yaw, edge, at_m, back_m=60.0, out_m=30.0):
+    """Insert a loop off the map (a parking lot the map lacks): from the frame at ``at_m`` out ``out_m`` to the
+    right, back parallel to the road, and onto it again ``back_m`` earlier, which is then driven again. Frames
+    off the map get road -1. Returns xy, yaw, edge and the first frame back on the road."""
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+    k, j = int(np.searchsorted(cum, at_m)), int(np.searchsorted(cum, at_m - back_m))
+    h = np.arctan2(*(xy[k] - xy[j])[::-1])
+    right = np.array([np.sin(h), -np.cos(h)])
+    corners = [xy[k], xy[k] + right * out_m, xy[j] + right * out_m, xy[j]]
+    pts = [corners[0]]
+    for a, b in zip(corners[:-1], corners[1:]):
+        n = max(1, int(np.hypot(*(b - a))))
+        pts += list(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
+    pts = np.asarray(pts)
+    for _ in range(3):  # rounded corners
+        pts[1:-1] = (pts[:-2] + pts[1:-1] + pts[2:]) / 3.0
+    loop_yaw = np.arctan2(*np.diff(pts, axis=0).T[::-1])[1:]
+    loop = pts[1:-1]
+    out_xy = np.concatenate([xy[:k + 1], loop, xy[j:]])
+    out_yaw = np.unwrap(np.concatenate([yaw[:k + 1], loop_yaw, yaw[j:]]))
+    out_edge = np.concatenate([edge[:k + 1], np.full(len(loop), -1), edge[j:]])
+    return out_xy, out_yaw, out_edge, k + 1 + len(loop)
+
+
+def found_again(seed, **metric):
+    """Metres from the return onto the map to localized again, the oracle's from there, and the share of sure wrong
+    answers after it."""
+    graph, _ = irregular_grid()
+    road, conf = RoadMap(graph), conf_slices(**metric)
+    rng = np.random.default_rng(seed)
+    sim = simulate_pattern_drive(graph, 2400.0, NOISE_LEVELS["medium"], rng)
+    xy, yaw, edge, back = off_map_loop(sim.gt_xy, sim.gt_yaw, sim.edge, 0.4 * sim.length_m)
+    odometry = integrate_odometry(xy, yaw, OdometryNoise.from_dict(sim.noise), rng)
+    driven = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+    localizer = make("metric")
+    observations = localizer.observe(odometry, road, conf)
+    localizer.reset(road, conf)
+    track = localizer.run(observations.items)
+    frame = observations.frame
+    on = edge[frame] >= 0
+    right = np.zeros(len(frame), bool)
+    right[on] = Judge(graph, 5.0).right(track.state[on], edge[frame][on], xy[frame][on])
+    before, after = frame < back - 200, frame >= back
+    if localized_step(right[before], driven[frame[before]], 200.0) is None or (track.confidence[~on] >= 0.9).any():
+        return np.nan, np.nan, np.nan  # not on track before the loop, or sure of a road while off the map
+    tail = np.arange(back, len(edge))
+    oracle = Oracle(graph, road.states).count(true_path(graph, edge[tail], xy[tail], driven[tail] - driven[back]), 0, 200.0)
+    step = localized_step(right[after], driven[frame[after]] - driven[back], 200.0)
+    found = driven[frame[after]][step] - driven[back] if step is not None else np.inf
+    return found, oracle.localized_m, float(np.mean((track.confidence[after] >= 0.9) & ~right[after]))
+
+
+@pytest.mark.parametrize("seed", [4, 7])
+def test_found_again_after_a_stretch_off_the_map(seed):
+    found, oracle, sure_wrong = found_again(seed)
+    assert np.isfinite(oracle) and found <= 1.5 * oracle + 20.0, (found, oracle)
+    assert sure_wrong <= 0.01
+
+
+def test_a_mirror_walk_does_not_end_sure():
+    # three laps of an out-and-back on a dual carriageway with side roads at unmirrored places: the loop the other
+    # way round on the other carriageway fits every turn and length (the oracle: ambiguous)
+    graph, south, north = dual_carriageway(south_sides=(200.0, 300.0, 450.0), north_sides=(380.0, 520.0, 780.0))
+    xy, edge, driven = drive_along(graph, loop_nodes(south, north, 3))
+    smooth = xy.copy()
+    for _ in range(6):
+        smooth[1:-1] = (smooth[:-2] + smooth[1:-1] + smooth[2:]) / 3.0
+    yaw = np.unwrap(np.arctan2(*np.gradient(smooth, axis=0).T[::-1]))
+    road, conf = RoadMap(graph), conf_slices()
+    localizer = make("metric")
+    observations = localizer.observe(Odometry(smooth, yaw), road, conf)
+    localizer.reset(road, conf)
+    track = localizer.run(observations.items)
+    assert (track.confidence < 0.9).all()
+    marginal = localizer.filter.fine.edge_marginals()[0]
+    true_edge = int(edge[observations.frame[-1]])
+    mirror = int(np.argsort(marginal)[-2] if np.argmax(marginal) == true_edge else np.argmax(marginal))
+    assert marginal[true_edge] >= 0.3 and marginal[mirror] >= 0.3  # both places hold the belief
+    mid = graph.edges.iloc[[true_edge, mirror]]
+    assert set(mid.u.tolist() + mid.v.tolist()) & set(south.values()) and set(mid.u.tolist() + mid.v.tolist()) & set(north.values())
