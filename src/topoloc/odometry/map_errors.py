@@ -54,8 +54,8 @@ LEVELS: dict[str, dict[str, dict[str, Any]]] = {
                     "high": {"share": 0.5, "gap_m": (15.0, 20.0)}},
     "two_way_as_dual": {"low": {"share": 0.1, "gap_m": (15.0, 20.0)}, "medium": {"share": 0.25, "gap_m": (15.0, 20.0)},
                         "high": {"share": 0.5, "gap_m": (15.0, 20.0)}},
-    "missing_road": {"low": {"share": 0.05, "depth_m": (25.0, 45.0)}, "medium": {"share": 0.15, "depth_m": (25.0, 45.0)},
-                     "high": {"share": 0.3, "depth_m": (25.0, 45.0)}},
+    "missing_road": {"low": {"share": 0.02, "depth_m": (25.0, 45.0)}, "medium": {"share": 0.05, "depth_m": (25.0, 45.0)},
+                     "high": {"share": 0.15, "depth_m": (25.0, 45.0)}},
     "extra_road": {"low": {"share": 0.03}, "medium": {"share": 0.08}, "high": {"share": 0.15}},
 }
 
