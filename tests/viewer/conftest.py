@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from viewer_helpers import write_small_viewer
+from viewer_helpers import write_repeat_inputs, write_small_viewer
 
 from topoloc.viewer.browser import chromium_missing, start_chromium
 
@@ -14,6 +14,12 @@ def small_viewer(tmp_path_factory):
     path = tmp_path_factory.mktemp("viewer") / "drive.html"
     data, graph, xy = write_small_viewer(path)
     return path, data, graph, xy
+
+
+@pytest.fixture()
+def repeat_inputs(tmp_path):
+    """The teach-and-repeat viewer's inputs (:func:`viewer_helpers.write_repeat_inputs`), by name."""
+    return write_repeat_inputs(tmp_path)
 
 
 @pytest.fixture(scope="session")

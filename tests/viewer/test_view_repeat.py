@@ -5,40 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from viewer_helpers import OFFSET, embedded, small_drive
+from viewer_helpers import EPISODES, embedded
 
 from topoloc.config import load
 from topoloc.errors import InputError
+from topoloc.graph.road_graph import RoadGraph
+from topoloc.viewer.page import latlon_of
 from topoloc.viewer.view_repeat import run
-
-
-@pytest.fixture()
-def repeat_inputs(tmp_path):
-    graph, xy, _, _ = small_drive()
-    graph.save_graphml(tmp_path / "graph.graphml")
-    teach = xy[::5]
-    commands = np.where(np.arange(len(teach)) % 20 == 0, "turn_left", "follow")
-    pd.DataFrame({"vertex": np.arange(len(teach)), "x": teach[:, 0], "y": teach[:, 1], "s": 5.0 * np.arange(len(teach)),
-                  "gt_x": teach[:, 0], "gt_y": teach[:, 1], "command": commands}).to_csv(tmp_path / "vertices.csv", index=False)
-    repeat = xy[2::5][:60]
-    rows = []
-    for condition in ("fog", "night"):
-        for method, shift in (("siamese network", 0), ("odometry only", 3)):
-            for f, p in enumerate(repeat):
-                vertex = min(f + shift, len(teach) - 1) if not (method == "odometry only" and f == 7) else -1
-                rows.append({"condition": condition, "method": method, "frame": f, "gt_x": p[0], "gt_y": p[1],
-                             "vertex": vertex, "s": 0.0, "error_m": float(np.hypot(*(teach[vertex] - p))) if vertex >= 0 else np.nan,
-                             "event": "match", "score": 0.5})
-    pd.DataFrame(rows).to_csv(tmp_path / "frames.csv", index=False)
-    images = np.random.default_rng(0).integers(0, 255, size=(2, len(repeat), 12, 40, 3), dtype=np.uint8)
-    np.savez(tmp_path / "places.npz", images=images, conditions=np.array(["fog", "night"]))
-    pd.DataFrame({"route": 0, "route_start_m": 100.0, "route_length_m": 400.0, "condition": ["night", "night", "fog"],
-                  "agent": ["Topo-LP (ground truth)", "replay (place_loop)", "replay (place_loop)"],
-                  "outcome": ["success", "off_road", "off_road"], "success": [True, False, False],
-                  "progress_m": [400.0, 150.0, 20.0]}).to_csv(tmp_path / "episodes.csv", index=False)
-    return {"graph": str(tmp_path / "graph.graphml"), "vertices": str(tmp_path / "vertices.csv"),
-            "frames": str(tmp_path / "frames.csv"), "repeat": str(tmp_path / "places.npz"),
-            "episodes": str(tmp_path / "episodes.csv")}
 
 
 def test_the_repeat_viewer_shows_each_method_its_vertex_and_the_camera(repeat_inputs, tmp_path):
@@ -66,4 +39,31 @@ def test_the_repeat_viewer_shows_each_method_its_vertex_and_the_camera(repeat_in
 def test_an_unknown_condition_names_the_key(repeat_inputs, tmp_path):
     conf = {"viewer": load(None, {"viewer": {"condition": "snow"}})["viewer"], "region": "test"}
     with pytest.raises(InputError, match="viewer.condition"):
+        run(conf, repeat_inputs, {"html": str(tmp_path / "repeat.html")})
+
+
+def test_the_closed_loop_drives_of_the_condition_are_replayed_by_progress(repeat_inputs, tmp_path):
+    conf = {"viewer": load(None, {"viewer": {"condition": "night"}})["viewer"], "region": "test"}
+    run(conf, repeat_inputs, {"html": str(tmp_path / "repeat.html")})
+    blob = embedded(tmp_path / "repeat.html")
+    drives = blob["drives"]
+    assert [d["key"] for d in drives] == EPISODES[:2]  # the night drives only
+    success, failed = drives
+    assert failed["label"] == "replay (place_loop), route 0, repeat 0: off_road after 150 m" and failed["outcome"] == "off_road"
+    traces = pd.read_csv(repeat_inputs["traces"])
+    trace = traces[traces.episode == EPISODES[1]]
+    latlon = latlon_of(RoadGraph.load(repeat_inputs["graph"]).crs)
+    assert failed["pos"] == latlon(trace[["x", "y"]].to_numpy()) and failed["end"] == failed["pos"][-1]
+    assert failed["text"][0] == "0.0 s · 5.0 m/s · command left (vertex 20) · steer +0.00"
+    # each trace point shown from the first row that has driven as far as the route's start plus its progress
+    driven = np.asarray(blob["time"]["driven_m"])
+    expected = [int(np.flatnonzero(driven >= 100.0 + s)[0]) for s in trace.s_m]
+    assert failed["idx"] == expected and driven[failed["idx"][0] - 1] < 100.0 <= driven[failed["idx"][0]]
+    assert success["idx"][-1] == len(driven) - 1  # beyond the repeat drive: at its last row
+
+
+def test_traces_that_are_not_traces_name_the_file(repeat_inputs, tmp_path):
+    pd.DataFrame({"episode": ["x"]}).to_csv(repeat_inputs["traces"], index=False)
+    conf = {"viewer": load(None, {})["viewer"], "region": "test"}
+    with pytest.raises(InputError, match="traces.csv.gz.*no 'route' column"):
         run(conf, repeat_inputs, {"html": str(tmp_path / "repeat.html")})

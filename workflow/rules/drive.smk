@@ -97,6 +97,7 @@ rule follow_route:
             labels={"region": "{region}", "figure": "frame strip"},
         ),
         junctions="results/{region}/drive/follow/junctions.csv",
+        traces="results/{region}/drive/follow/traces.csv.gz",
         junction_figure=report(
             "results/{region}/drive/follow/junctions.png",
             caption="../report/drive_junctions.rst",

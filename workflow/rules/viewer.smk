@@ -36,13 +36,14 @@ rule view_drive:
 
 rule view_repeat:
     """The teach-and-repeat viewer: topometric map, repeat track, each method's localization and the camera frame;
-    route following's routes and where its episodes failed."""
+    route following's routes, where its episodes failed, and each closed-loop drive replayed (vehicle, command)."""
     input:
         graph=rules.build_graph.output.graph,
         vertices=rules.build_topometric_map.output.vertices,
         frames=rules.localize_repeat.output.frames,
         repeat="results/{region}/places/repeat/places.npz",
         episodes=rules.follow_route.output.episodes,
+        traces=rules.follow_route.output.traces,
     output:
         html=report(
             "results/{region}/viewer/teach_repeat.html",

@@ -54,7 +54,9 @@ def teach_controls(sim: Simulator, expert: Expert, condition: str, seed: int,
 @dataclass
 class Episode:
     """One repeat drive: outcome, steps, progress (m), path of the vehicle, localization errors, timing, frames; per
-    step its progress ``s`` along the lane (m) and ``speed`` (m/s); ``movie``: every few steps a :class:`MovieFrame`."""
+    step its progress ``s`` along the lane (m), ``speed`` (m/s) and heading ``yaw`` (rad, like ``xy`` one more than
+    the steps: the start and after each step), and per step the localized ``vertex`` and the ``steer`` commanded;
+    ``movie``: every few steps a :class:`MovieFrame`."""
 
     outcome: str
     steps: int
@@ -68,6 +70,9 @@ class Episode:
     s: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     speed: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     movie: list[MovieFrame] = field(default_factory=list)
+    yaw: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    vertex: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    steer: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass(frozen=True)
@@ -106,6 +111,7 @@ def run_episode(sim: Simulator, agent: Any, localization: Any, topo: TopometricM
     every = max(1, int(expected // strip_frames)) if strip_frames else 0
     xy, errors, frames, since_sure, slow_steps, lat = [sim.centre], [], [], 0, 0, []
     s_trace, speed_trace, movie = [sim.s], [sim.state.v], []
+    yaw_trace, vertex_trace, steer_trace = [float(sim.state.yaw)], [], []
     previous, status = sim.centre, RUNNING
     started = time.perf_counter()
     while status == RUNNING:
@@ -131,8 +137,11 @@ def run_episode(sim: Simulator, agent: Any, localization: Any, topo: TopometricM
             movie.append(MovieFrame(obs.image, sim.centre, float(sim.state.yaw), int(vertex),
                                     COMMANDS[int(topo.command[vertex])], float(control.steer), float(obs.speed),
                                     sim.t / sim.spec.control_hz))
+        vertex_trace.append(int(vertex))
+        steer_trace.append(float(control.steer))
         obs, status = sim.step(control)
         xy.append(sim.centre)
+        yaw_trace.append(float(sim.state.yaw))
         s_trace.append(sim.s)
         speed_trace.append(sim.state.v)
         lat.append(abs(sim.lateral))
@@ -140,4 +149,5 @@ def run_episode(sim: Simulator, agent: Any, localization: Any, topo: TopometricM
             break
     seconds = time.perf_counter() - started
     return Episode(status, sim.t, sim.s, np.asarray(xy), np.asarray(errors), slow_steps, seconds,
-                   float(np.mean(lat)) if lat else 0.0, frames, np.asarray(s_trace), np.asarray(speed_trace), movie)
+                   float(np.mean(lat)) if lat else 0.0, frames, np.asarray(s_trace), np.asarray(speed_trace), movie,
+                   np.asarray(yaw_trace), np.asarray(vertex_trace, np.int64), np.asarray(steer_trace))

@@ -23,6 +23,8 @@ agent and localization and for the expert's own drives (``expert (ground truth)`
 condition), taken as commanded or not, with its turn class, kind, distance from the previous junction and the speed
 on entry: ``junctions`` (one row per drive and junction), ``junction_figure`` (share taken per turn class and kind) and
 a section of ``table``. ``movie_<agent>`` (optional): one repeat drive per agent to watch (:mod:`topoloc.drive.movie`).
+``traces`` (optional): every drive's vehicle, speed, localization and command over time, ``drive.follow.trace_hz``
+rows a second (:mod:`topoloc.drive.traces`; the teach-and-repeat viewer replays them).
 """
 
 from __future__ import annotations
@@ -48,6 +50,7 @@ from topoloc.drive.localization_adapters import GroundTruth, PlaceLocalization
 from topoloc.drive.repeat_routes import intersections, repeat_routes
 from topoloc.drive.routes import make_simulator, teach_route
 from topoloc.drive.topo_lp import CONTROLLERS
+from topoloc.drive.traces import episode_trace, write_traces
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localizer import PLACE_OBSERVATIONS
 from topoloc.place.network import load_model
@@ -83,7 +86,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
                                       CONTROLLERS[a]) for a in follow["agents"] if a in CONTROLLERS}
     retrieval = load_model(inputs["model"]) if place_names else None
     ahead = follow["teach_speed_ahead_m"]
-    rows, traces, strips, junction_rows, movies = [], {}, [], [], {}
+    rows, traces, strips, junction_rows, movies, steps = [], {}, [], [], {}, []
     strip_method = (next((a for a in ("lp", "dlm") if a in follow["agents"]), follow["agents"][0]),
                     place_names[0] if place_names else "ground_truth")
     movie_loc, movie_every = place_names[0] if place_names else "ground_truth", int(follow["movie"]["every_steps"])
@@ -126,6 +129,9 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
                 progress.update()
                 continue
             traces[key] = episode.xy
+            if "traces" in outputs:
+                steps.append(episode_trace(episode, topo, sim.spec.control_hz, float(follow["trace_hz"]), episode=key,
+                                           route=k, condition=condition, repeat=repeat, agent=method, localization=loc))
             if want_strip:
                 strips.append((f"{condition}: {episode.outcome}", episode.frames))
             rows.append({"episode": key, "route": k, "route_start_m": part.start_m, "route_length_m": route.length_m,
@@ -141,6 +147,9 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
             progress.update()
     progress.close()
     episodes = pd.DataFrame(rows)
+    if "traces" in outputs:
+        size = write_traces(steps, outputs["traces"])
+        log.info("traces: %d rows of %d drives, %.0f kB", sum(len(s) for s in steps), len(steps), size / 1e3)
     movie = follow["movie"]
     for agent, (title, frames, lane, vertex_xy) in movies.items():
         size = write_movie(frames, lane, vertex_xy, title, outputs[f"movie_{agent}"], int(movie["height_px"]),

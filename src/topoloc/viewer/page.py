@@ -57,6 +57,9 @@ class ViewerData:
     ``lines``: static polylines (``name``, ``color``, ``latlngs``). ``images``: ``idx`` and ``src`` (data URIs).
     ``text``: ``idx`` and ``text`` (a status line per moment, e.g. the command). ``time['t_s']`` may be None.
     ``fit_roads``: open on the whole road graph (a city, to see the belief shrink), else on the drive.
+    ``drives``: closed-loop drives to replay, one picked at a time (a selector): ``key``, ``label``, ``outcome``,
+    ``idx`` (the row of each trace point), ``pos`` (``[lat, lon]`` per point), ``text`` (per point: time, speed,
+    command) and ``end`` (``[lat, lon]`` where it stopped).
     """
 
     title: str
@@ -71,6 +74,7 @@ class ViewerData:
     sure: float = 0.9
     notes: list[str] = field(default_factory=list)
     fit_roads: bool = False
+    drives: list[dict[str, Any]] = field(default_factory=list)
 
 
 def agent(name: str, label: str, index: int, rows: NDArray[np.int64], latlon: list[list[float]] | None,

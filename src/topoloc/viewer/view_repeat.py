@@ -7,8 +7,11 @@ command), ``frames`` (``localize_repeat``: per condition, method and repeat fram
 localization (its vertex's position) over the slider's frames, the camera frame every ``viewer.image_every`` frames
 (a downscaled JPEG) and the command of the localized vertex. With ``episodes`` (``follow_route``'s
 ``episodes.csv``, optional) also route following in closed loop: each evaluation route along the teach route, and
-where each episode of the shown condition that failed stopped (its progress along the route; ``follow_route`` keeps
-no trajectory, so the vehicle itself is not replayed). Output: ``html``.
+where each episode of the shown condition that failed stopped (its progress along the route). With ``traces``
+(``follow_route``'s ``traces.csv.gz``, optional) each closed-loop drive of the shown condition can be picked and
+replayed: the vehicle, its trail, speed and the command of its localized vertex, and where it stopped. The slider
+moves the vehicle by progress: at a row that has driven ``d`` metres of the repeat drive the vehicle is at its last
+trace point whose progress (the route's start plus its progress along the route) is at most ``d``. Output: ``html``.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import cv2
 import numpy as np
 import pandas as pd
 
+from topoloc.drive.traces import read_traces
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.viewer.page import ViewerData, agent, latlon_of, thin_rows, write_viewer
@@ -72,6 +76,35 @@ def add_episodes(data: ViewerData, path: str, vertices: pd.DataFrame, condition:
                       "where the others stopped.")
 
 
+def add_drives(data: ViewerData, path: str, episodes_path: str | None, condition: str, row_m: np.ndarray,
+               latlon: Any) -> None:
+    """Closed-loop drives of ``condition`` from the traces at ``path``, to replay along the slider (``row_m``: the
+    metres driven at each row of the repeat drive); outcome and route start from ``episodes_path``."""
+    traces = read_traces(path)
+    traces = traces[traces.condition.astype(str) == condition]
+    episodes = pd.DataFrame()
+    if episodes_path:
+        episodes = _table(episodes_path, {"episode", "route_start_m", "outcome", "progress_m"},
+                          "follow_route episodes table").set_index("episode")
+    for key, run_ in traces.groupby("episode", sort=False):
+        run_ = run_.sort_values("step")
+        known = key in episodes.index
+        start = float(episodes.route_start_m.at[key]) if known else 0.0
+        along = start + np.maximum.accumulate(run_.s_m.to_numpy(float))
+        idx = np.minimum(np.searchsorted(row_m, along), len(row_m) - 1)  # first row that has driven as far (or the last)
+        pos = latlon(run_[["x", "y"]].to_numpy(float))
+        outcome = str(episodes.outcome.at[key]) if known else "?"
+        end = f"{outcome} after {float(episodes.progress_m.at[key]):.0f} m" if known else "end"
+        text = [f"{t:.1f} s · {v:.1f} m/s · command {c} (vertex {x}) · steer {st:+.2f}"
+                for t, v, c, x, st in zip(run_.t_s, run_.speed_mps, run_.command, run_.vertex, run_.steer)]
+        first = run_.iloc[0]
+        data.drives.append({"key": str(key), "outcome": outcome, "idx": idx.tolist(), "pos": pos, "text": text,
+                            "end": pos[-1], "label": f"{first['agent']}, route {first['route']}, repeat {first['repeat']}: {end}"})
+    if data.drives:
+        data.notes.append("Closed loop: pick a drive; the black vehicle moves with the slider by its progress along the "
+                          "route (trace, command of its localized vertex); a red cross marks where it stopped.")
+
+
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
     """Write the teach-and-repeat viewer; its size, frames and methods."""
     view = conf["viewer"]
@@ -116,6 +149,9 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
                                   else f"{method}: not localized" for v, e in zip(vertex, error)]}
     if inputs.get("episodes"):
         add_episodes(data, inputs["episodes"], vertices, condition, driven[rows], latlon)
+    if inputs.get("traces"):
+        add_drives(data, inputs["traces"], inputs.get("episodes"), condition,
+                   np.asarray(data.time["driven_m"], float), latlon)  # the metres the slider shows
     npz = np.load(inputs["repeat"])
     images = npz["images"]
     names = [str(c) for c in npz["conditions"]] if "conditions" in npz.files else conditions

@@ -1,6 +1,7 @@
 /* topoloc viewer: the time slider, playback, layers, belief and confidence chart over a folium (Leaflet) map.
    Reads the JSON block #topoloc-data written by topoloc.viewer.page (see ViewerData there). Exposes
-   window.topolocViewer for tests and benchmarks: setRow(i), row(), agentLatLng(name), beliefKey(), visible(name). */
+   window.topolocViewer for tests and benchmarks: setRow(i), row(), agentLatLng(name), beliefKey(), visible(name),
+   and for closed-loop drives (D.drives) selectDrive(key), driveKey(), driveLatLng(), driveText(). */
 (function () {
   "use strict";
   const D = JSON.parse(document.getElementById("topoloc-data").textContent);
@@ -37,6 +38,13 @@
   if (D.belief) { el("h2", { text: "Belief (metric filter): leading roads" }, side); beliefBox = el("ol", { id: "tl-belief" }, side); }
   if (D.images) { el("h2", { text: "Camera" }, side); img = el("img", { id: "tl-image", alt: "camera frame" }, side); }
   if (D.text) textBox = el("div", { id: "tl-text" }, side);
+  let drivePick = null, driveBox = null;
+  if (D.drives && D.drives.length) {
+    el("h2", { text: "Route following (closed loop)" }, side);
+    drivePick = el("select", { id: "tl-drive" }, side);
+    D.drives.forEach((d, k) => el("option", { value: k, text: d.label }, drivePick));
+    driveBox = el("div", { id: "tl-drive-text" }, side);
+  }
   (D.notes || []).forEach((n) => el("p", { class: "tl-note", text: n }, side));
   const bottom = el("div", { id: "tl-bottom" }, document.body);
   const controls = el("div", { id: "tl-controls" }, bottom);
@@ -92,6 +100,31 @@
       fillColor: "#fff", fillOpacity: 0.9 }).bindTooltip(m.label).on("click", () => setRow(m.idx)).addTo(marks);
   });
   if (D.marks && D.marks.length) overlays["events: starts, where each became sure, failures"] = marks;
+  /* ---- a closed-loop drive: its trace, the vehicle on it, where it stopped ---- */
+  let drive = null;
+  if (drivePick) {
+    const g = L.layerGroup().addTo(map);
+    const path = L.polyline([], { color: "#000", weight: 2, opacity: 0.5, dashArray: "3 5" }).addTo(g);
+    const trail = L.polyline([], { color: "#000", weight: 3, opacity: 0.85 }).addTo(g);
+    const end = L.marker([0, 0], { icon: L.divIcon({ className: "tl-end", html: "✕", iconSize: [16, 16] }) }).bindTooltip("").addTo(g);
+    const vehicle = L.circleMarker([0, 0], { radius: 7, color: "#fff", weight: 2, fillColor: "#000", fillOpacity: 1 })
+      .bindTooltip("", { permanent: true, direction: "right", className: "tl-command" });
+    drive = { g, path, trail, end, vehicle, d: null, shown: null };
+    overlays["closed-loop drive (vehicle, trace, end)"] = g;
+    drivePick.addEventListener("change", () => selectDrive(+drivePick.value));
+  }
+  function selectDrive(k) {
+    if (!drive) return;
+    if (typeof k === "string") k = D.drives.findIndex((d) => d.key === k);
+    k = Math.max(0, Math.min(D.drives.length - 1, k));
+    drivePick.value = k;
+    drive.d = D.drives[k];
+    drive.path.setLatLngs(drive.d.pos);
+    const ok = drive.d.outcome === "success";
+    drive.end.setLatLng(drive.d.end).setTooltipContent(drive.d.label)
+      .setIcon(L.divIcon({ className: ok ? "tl-end tl-end-ok" : "tl-end", html: ok ? "✓" : "✕", iconSize: [16, 16] }));
+    if (current >= 0) setRow(current);
+  }
   L.control.layers(null, overlays, { collapsed: false }).addTo(map);
 
   /* ---- the confidence chart over metres driven ---- */
@@ -157,6 +190,20 @@
     }
     if (img) { const k = last(D.images.idx, i); if (k >= 0) img.src = D.images.src[k]; }
     if (textBox) { const k = last(D.text.idx, i); textBox.textContent = k >= 0 ? D.text.text[k] : ""; }
+    if (drive && drive.d) {
+      const d = drive.d, k = last(d.idx, i);
+      drive.shown = null;
+      if (k < 0) {
+        drive.g.removeLayer(drive.vehicle); drive.trail.setLatLngs([]);
+        driveBox.textContent = `${d.label}: not started (its route starts further along)`;
+      } else {
+        drive.vehicle.setLatLng(d.pos[k]).setTooltipContent(d.text[k].split(" · ")[2]);
+        drive.g.addLayer(drive.vehicle);
+        drive.trail.setLatLngs(d.pos.slice(0, k + 1));
+        drive.shown = d.pos[k];
+        driveBox.textContent = `${d.label} — ${d.text[k]}` + (k === d.pos.length - 1 ? " (stopped)" : "");
+      }
+    }
     const x = X(t.driven_m[i]);
     cursor.setAttribute("x1", x); cursor.setAttribute("x2", x);
   }
@@ -178,7 +225,13 @@
     truthLatLng: () => (truthMarker ? [truthMarker.getLatLng().lat, truthMarker.getLatLng().lng] : null),
     beliefKey: () => (D.belief ? JSON.stringify(D.belief.roads[last(D.belief.idx, current)] || []) : ""),
     heatPoints: () => (heat ? heat._latlngs.length : 0),
+    selectDrive: (k) => selectDrive(k),
+    driveKey: () => (drive && drive.d ? drive.d.key : null),
+    driveLatLng: () => (drive && drive.shown && map.hasLayer(drive.g) && drive.g.hasLayer(drive.vehicle)
+      ? [drive.vehicle.getLatLng().lat, drive.vehicle.getLatLng().lng] : null),
+    driveText: () => (driveBox ? driveBox.textContent : null),
   };
+  if (drive) selectDrive(0);
   setRow(0);
   document.body.setAttribute("data-topoloc-ready", "1");
 })();
