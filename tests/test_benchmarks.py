@@ -17,8 +17,8 @@ REPO = Path(__file__).resolve().parents[1]
 BENCHMARKS = sorted(p.stem for p in (REPO / "benchmarks").glob("bench_*.py"))
 
 
-def test_the_ten_benchmarks_are_there():
-    assert len(BENCHMARKS) == 10 and "bench_odometry" in BENCHMARKS
+def test_the_eleven_benchmarks_are_there():
+    assert len(BENCHMARKS) == 11 and "bench_odometry" in BENCHMARKS and "bench_lane_offset" in BENCHMARKS
 
 
 @pytest.mark.parametrize("name", BENCHMARKS)
