@@ -3,6 +3,8 @@ and routes can share out the training conditions."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -11,6 +13,7 @@ from tests.drive.conftest import drive_conf, road_simulator, town_route
 from topoloc.drive.controller_training import DemoData
 from topoloc.drive.demonstrations import (
     LOCAL_PATH_M,
+    WIDE_MIDDLE_MIN,
     Demonstrations,
     SideViews,
     collect_demonstrations,
@@ -21,6 +24,7 @@ from topoloc.drive.demonstrations import (
     route_conditions,
     sharp_m,
     training_route,
+    wide_middle_route,
 )
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
 from topoloc.drive.routes import make_simulator, random_drive_route
@@ -138,3 +142,37 @@ def test_routes_recorded_in_another_order_are_the_same_demonstrations(town, town
     assert np.array_equal(alone.images, again.images) and alone.conditions == again.conditions
     for name in Demonstrations.FIELDS:
         assert np.array_equal(getattr(alone, name), getattr(again, name)), name
+
+
+def test_wide_middle_share_draws_routes_in_the_middle_of_wide_unmarked_roads(town_graph, caplog):
+    """drive.demonstrations.wide_middle_share: that share of the routes, spread over the indices, is drawn with at
+    least half its lane in the middle of a wide road without a centre line; the lane length of the drawn routes on such
+    roads is at least share * WIDE_MIDDLE_MIN; 0 keeps the plain draws; a map without such roads falls back to them."""
+    drive = drive_conf(demonstrations={"min_steps": 20, "min_distance_m": 0})
+    conf = {"drive": drive}
+    narrow = town_route(town_graph, "straight", drive)
+    n = len(narrow.s)
+    wide = replace(narrow, width=np.full(n, 8.0), marked=np.zeros(n, bool))
+    marked = replace(narrow, width=np.full(n, 8.0), marked=np.ones(n, bool))  # wide but two-way: keep right
+    assert narrow.wide_middle_share == 0.0 and marked.wide_middle_share == 0.0 and wide.wide_middle_share == 1.0
+    drawn: list[int] = []
+
+    def make_route(rng):  # narrow, marked, dead end, wide, ...
+        drawn.append(len(drawn))
+        return [narrow, marked, None, wide][(len(drawn) - 1) % 4]
+
+    routes = 9
+    for share in (0.0, 1.0 / 3.0, 0.5, 1.0):
+        chosen = []
+        for r in range(routes):
+            drawn.clear()
+            chosen.append(training_route(r, conf, None, make_route, wide_middle_share=share))
+        picked = [r for r in range(routes) if wide_middle_route(r, share)]
+        assert len(picked) == int(np.floor(routes * share))
+        assert all(chosen[r] is wide for r in picked) and all(chosen[r] is narrow for r in range(routes) if r not in picked)
+        lane = np.array([c.length_m for c in chosen])
+        assert (lane * [c.wide_middle_share for c in chosen]).sum() / lane.sum() >= share * WIDE_MIDDLE_MIN - 1e-9
+    assert [r for r in range(routes) if wide_middle_route(r, 1.0 / 3.0)] == [2, 5, 8]  # spread, not the first ones
+    with caplog.at_level("WARNING"):
+        assert training_route(0, conf, None, lambda rng: narrow, wide_middle_share=1.0) is narrow
+    assert "wide_middle_share" in caplog.text

@@ -42,6 +42,10 @@ LOCAL_PATH_M = 20
 DROP_BEFORE_FAILURE = 20
 #: A bend of the lane tighter than this radius (metres) is sharp (``drive.demonstrations.candidates``).
 SHARP_RADIUS_M = 15.0
+#: A route drawn for ``drive.demonstrations.wide_middle_share`` keeps at least this share of its lane in the middle of a
+#: wide unmarked carriageway, and is drawn up to this many times per candidate.
+WIDE_MIDDLE_MIN = 0.5
+WIDE_MIDDLE_ATTEMPTS = 60
 
 
 def as_input(image: NDArray[np.uint8], color: bool) -> NDArray[np.uint8]:
@@ -195,19 +199,29 @@ def sharp_m(route: DriveRoute) -> float:
     return float((lane_curvature(route.xy) > 1.0 / SHARP_RADIUS_M).sum()) * DENSE_M
 
 
+def wide_middle_route(r: int, share: float) -> bool:
+    """Whether training route ``r`` is one of the ``share`` of the routes, spread evenly over the indices, that must
+    run mostly in the middle of a wide unmarked carriageway (``drive.demonstrations.wide_middle_share``)."""
+    return int(np.floor((r + 1) * share)) > int(np.floor(r * share))
+
+
 def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None, make_route: Any,
-                   stream: int = 41, candidates: int = 1) -> DriveRoute:
+                   stream: int = 41, candidates: int = 1, wide_middle_share: float = 0.0) -> DriveRoute:
     """Training route ``r``: of its seeded draws ``make_route(rng)`` that keep ``min_steps`` recorded steps
     ``min_distance_m`` away from ``avoid_xy``, the first ``candidates`` ones, and of those the one with the most lane
     in sharp bends (:func:`sharp_m`; the same route on every call: DAgger drives the demonstrations' routes; another
-    ``stream`` draws other routes the same way). InputError naming ``drive.lane.max_shared_m`` when no draw gave a
-    route, ``drive.demonstrations.min_distance_m`` when none kept away from ``avoid_xy``."""
+    ``stream`` draws other routes the same way). When :func:`wide_middle_route` picks ``r`` for
+    ``wide_middle_share``, only draws with at least :data:`WIDE_MIDDLE_MIN` of their lane in the middle of a wide
+    unmarked carriageway count (:attr:`DriveRoute.wide_middle_share`; if no draw has that, the others, with a warning).
+    InputError naming ``drive.lane.max_shared_m`` when no draw gave a route, ``drive.demonstrations.min_distance_m``
+    when none kept away from ``avoid_xy``."""
     drive = conf["drive"]
     demo_conf = drive["demonstrations"]
     every = int(demo_conf.get("record_every", 1))
     step_m = float(drive["expert"]["cruise_mps"]) / float(drive["episode"]["control_hz"])
-    drawn, kept = 0, []
-    attempts = 20 * int(candidates)
+    wide = wide_middle_route(r, float(wide_middle_share))
+    drawn, kept, other = 0, [], []
+    attempts = (WIDE_MIDDLE_ATTEMPTS if wide else 20) * int(candidates)
     for attempt in range(attempts):
         route = make_route(np.random.default_rng([int(drive["seed"]), stream, r, attempt]))
         if route is None:
@@ -216,9 +230,16 @@ def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] |
         near = polyline_distance(route.xy[::8], avoid_xy) < float(demo_conf["min_distance_m"]) if avoid_xy is not None \
             else np.zeros(len(route.xy[::8]), bool)
         if (1.0 - near.mean()) * route.length_m / step_m / every >= int(demo_conf["min_steps"]):
+            if wide and route.wide_middle_share < WIDE_MIDDLE_MIN:
+                other.append(route)
+                continue
             kept.append(route)
             if len(kept) >= candidates:
                 break
+    if not kept and other:
+        log.warning("training route %d: no draw runs %.0f%% in the middle of a wide unmarked road "
+                    "(drive.demonstrations.wide_middle_share); drawn as the others", r, 100 * WIDE_MIDDLE_MIN)
+        kept = other[:candidates]
     if kept:
         return max(kept, key=sharp_m)  # the first of equals: one candidate gives the first route kept
     if not drawn:
@@ -241,7 +262,8 @@ def demonstrate_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64
     noise = NoiseSettings.from_conf(drive["noise"])
     color = bool(conf["place"]["image"]["color"])
     side = SideViews(int(demo_conf["side_views"]), float(demo_conf["side_lateral_m"]), float(demo_conf["side_yaw_deg"]))
-    chosen = training_route(r, conf, avoid_xy, make_route, candidates=int(demo_conf["candidates"]))
+    chosen = training_route(r, conf, avoid_xy, make_route, candidates=int(demo_conf["candidates"]),
+                            wide_middle_share=float(demo_conf.get("wide_middle_share", 0.0)))
     sim = make_simulator(chosen)
     expert = Expert(chosen, sim.spec, ExpertSettings.from_conf(drive["expert"]))
     parts, outcomes, injected = [], [], []
@@ -286,7 +308,9 @@ def collect_demonstrations(parts: list[Demonstrations], outcomes: list[str], inj
              "perturbed_share": float(demos.perturbed.mean()),
              "noise_injected_share": float(np.concatenate(injected).mean()) if injected else 0.0,
              "mean_speed_mps": float(demos.speed.mean()),
-             "mean_abs_lateral_m": float(np.abs(demos.lateral).mean())}
+             "mean_abs_lateral_m": float(np.abs(demos.lateral).mean()),
+             "wide_middle_routes": float(sum(wide_middle_route(r, float(demo_conf.get("wide_middle_share", 0.0)))
+                                             for r in range(int(demo_conf["routes"]))))}
     facts |= {f"steps_{name}": float(np.sum(demos.command == i)) for i, name in
               enumerate(("follow", "left", "right", "straight"))}
     if avoid_xy is not None:

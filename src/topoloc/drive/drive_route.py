@@ -37,7 +37,7 @@ from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.motion.route import sample_route
 from topoloc.place.topometric_map import route_intersections, vertex_commands
-from topoloc.render.textures import edge_widths, has_centre_line
+from topoloc.render.textures import MARKED_WIDTH_M, edge_widths, has_centre_line
 
 
 @dataclass
@@ -58,6 +58,8 @@ class DriveRoute:
     drivable: NDArray[np.uint8] = field(repr=False)
     corridor: NDArray[np.uint8] = field(repr=False)
     origin: tuple[float, float] = (0.0, 0.0)  #: map position of the rasters' top-left corner
+    #: per sample: the carriageway has a centre line (the lane keeps right of it); None: unknown (every sample unmarked)
+    marked: NDArray[np.bool_] | None = field(default=None, repr=False)
 
     @property
     def length_m(self) -> float:
@@ -146,12 +148,20 @@ class DriveRoute:
             corridor = self.corridor & band
         return DriveRoute([self.edges[i] for i in keep], [self.froms[i] for i in keep], self.xy[lo:hi], self.yaw[lo:hi],
                           self.s[lo:hi] - self.s[lo], self.edge[lo:hi], self.width[lo:hi], self.command[lo:hi],
-                          self.shared[lo:hi], self.drivable, corridor, self.origin)
+                          self.shared[lo:hi], self.drivable, corridor, self.origin,
+                          None if self.marked is None else self.marked[lo:hi])
 
     @property
     def shared_m(self) -> float:
         """Metres of the lane on another road's carriageway too (:func:`~topoloc.drive.lane_rasters.shared_samples`)."""
         return float(self.shared.sum()) * DENSE_M
+
+    @property
+    def wide_middle_share(self) -> float:
+        """Share of the lane in the middle of a carriageway at least :data:`~topoloc.render.textures.MARKED_WIDTH_M`
+        wide (no centre line: a wide one-way road), where a lane kept right would be a quarter of the road off."""
+        marked = np.zeros(len(self.s), bool) if self.marked is None else self.marked
+        return float(np.mean(~marked & (self.width >= MARKED_WIDTH_M)))
 
 
 
@@ -187,7 +197,7 @@ def build_route(graph: RoadGraph, edges: list[int], froms: list[int], smoothing_
                        origin, shape, margin_m)
     others = road_raster([(graph.geometry[e], float(widths[e])) for e in near if e not in set(edges)], origin, shape, 0.0)
     shared = shared_samples(xy, others, origin, graph.nodes.loc[graph.nodes.degree >= 3, ["x", "y"]].to_numpy(float))
-    route = DriveRoute(list(edges), list(froms), xy, yaw, s, label, width, command, shared, drivable, corridor, origin)
+    route = DriveRoute(list(edges), list(froms), xy, yaw, s, label, width, command, shared, drivable, corridor, origin, marked)
     off = route.off_corridor()
     if off.any():
         raise InputError(where, f"the lane leaves the route's roads at {s[int(np.argmax(off))]:.0f} m (a bend of a narrow "

@@ -137,7 +137,8 @@ def collect(controller: Any, agent: str, conf: dict[str, Any], round_index: int,
     routes = int(demo_conf["routes"]) - int(demo_conf["val_routes"])
     parts, outcomes, taken = [], [], []
     for r in tqdm(range(routes), desc=f"DAgger round {round_index + 1}", unit="route"):
-        route = training_route(r, conf, avoid_xy, make_route, candidates=int(demo_conf["candidates"]))
+        route = training_route(r, conf, avoid_xy, make_route, candidates=int(demo_conf["candidates"]),
+                               wide_middle_share=float(demo_conf.get("wide_middle_share", 0.0)))
         sim = make_simulator(route)
         expert = Expert(route, sim.spec, expert_settings)
         for c in route_conditions(r, len(conditions), demo_conf.get("conditions_per_route")):

@@ -29,7 +29,7 @@ TASKS = {"localization": "Localization", "trajectory": "Trajectory learning", "o
 BENCHMARKS = {
     "bench_localization": "localization", "bench_real_drives": "localization", "bench_train": "trajectory", "bench_dataset": "trajectory",
     "bench_odometry": "odometry", "bench_render": "odometry", "bench_place": "place", "bench_drive": "route_following",
-    "bench_viewer": "localization",
+    "bench_viewer": "localization", "bench_lane_offset": "route_following",
     "bench_map_errors": "localization", "bench_filter_recovery": "localization",
 }
 #: Experiment (results/{region}/experiments/<name>/summary.md) -> task; any other lands on the pipeline page.
