@@ -19,6 +19,7 @@ from topoloc.drive.route_planning import plan_route
 from topoloc.drive.simulator import SUCCESS, Simulator, VehicleSpec
 from topoloc.graph.from_osm import build_road_graph
 from topoloc.graph.road_graph import RoadGraph
+from topoloc.place.topometric_map import TopometricMap
 from topoloc.render.rig import StereoRig
 from topoloc.render.scene import Scene, scene_for_path
 
@@ -170,3 +171,11 @@ class ConstantSteer:
 
 #: The trivial controllers every closed-loop bound on a trained controller must fail: steering fixed at these values.
 BASELINES = {"always straight": 0.0, "always left": 1.0}
+
+
+def lane_map(route, step_m: float = 1.0) -> TopometricMap:
+    """A topometric map with a vertex every metre of the lane (ground truth = path integration)."""
+    s = np.arange(0.0, route.length_m, step_m)
+    xy = np.stack([route.point(v) for v in s])
+    command = np.array([route.command_at(v) for v in s])
+    return TopometricMap(np.zeros((len(s), 4), np.float32), np.zeros((len(s), 4), np.float32), xy, command, xy, "clear_noon")

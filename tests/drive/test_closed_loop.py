@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import make_config
-from tests.drive.conftest import drive_conf, route_scene, town_route
+from tests.drive.conftest import drive_conf, lane_map, route_scene, town_route
 from topoloc.drive.agents import ReplayAgent
 from topoloc.drive.episodes import run_episode, speed_limit_ahead, teach_controls
 from topoloc.drive.expert import Expert, ExpertSettings
@@ -17,14 +17,6 @@ from topoloc.drive.simulator import Control, Simulator, VehicleSpec
 from topoloc.errors import InputError
 from topoloc.place.topometric_map import TopometricMap
 from topoloc.render.rig import StereoRig
-
-
-def lane_map(route, step_m: float = 1.0) -> TopometricMap:
-    """A topometric map with a vertex every metre of the lane (ground truth = path integration)."""
-    s = np.arange(0.0, route.length_m, step_m)
-    xy = np.stack([route.point(v) for v in s])
-    command = np.array([route.command_at(v) for v in s])
-    return TopometricMap(np.zeros((len(s), 4), np.float32), np.zeros((len(s), 4), np.float32), xy, command, xy, "clear_noon")
 
 
 def right_turn(town, town_graph) -> tuple:

@@ -9,8 +9,7 @@ import pandas as pd
 import pytest
 
 from tests.conftest import make_config, write_osm
-from tests.drive.conftest import BASELINES, ConstantSteer, drive_conf, node_at, route_scene
-from tests.drive.test_closed_loop import lane_map
+from tests.drive.conftest import BASELINES, ConstantSteer, drive_conf, lane_map, node_at, route_scene
 from tests.render.conftest import lonlat
 from topoloc.drive.agents import ExpertAgent, ReplayAgent
 from topoloc.drive.drive_route import build_route
