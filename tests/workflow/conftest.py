@@ -5,8 +5,14 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import socket
 import subprocess
 import sys
+import tempfile
+import time
+import urllib.request
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,6 +28,45 @@ def clean_env() -> dict[str, str]:
     """This environment without the variables a ``snakemake`` call sets for its jobs (tracking store, invocation)."""
     drop = {"MLFLOW_TRACKING_URI", "TOPOLOC_INVOCATION_ID", "TOPOLOC_INVOCATION_PID"}
     return {k: v for k, v in os.environ.items() if k not in drop}
+
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on now."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def wait_for_http(url: str, server: subprocess.Popen, name: str, seconds: float = 120.0) -> None:
+    """Wait until ``url`` answers; fail if ``server`` exits first or ``seconds`` pass."""
+    deadline = time.monotonic() + seconds
+    while True:
+        try:
+            urllib.request.urlopen(url, timeout=2)
+            return
+        except OSError:
+            assert server.poll() is None, f"{name} exited"
+            assert time.monotonic() < deadline, f"{name} did not answer within {seconds:.0f} s"
+            time.sleep(0.5)
+
+
+@contextmanager
+def script_service(script: Path, prefix: str, port_vars: tuple[str, ...], export: str) -> Iterator[tuple[str, Path]]:
+    """Start a local service with ``bash script start FOLDER`` (a fresh folder under /tmp, free ports in the
+    environment variables ``port_vars``), yield the value of the ``export NAME=`` line it prints and its folder,
+    and stop it with ``bash script stop FOLDER`` however the caller ends."""
+    folder = Path(tempfile.mkdtemp(prefix=prefix, dir="/tmp"))  # the service's own user must enter it
+    folder.chmod(0o755)
+    env = {**os.environ, **{var: str(free_port()) for var in port_vars}}
+    started = subprocess.run(["bash", str(script), "start", str(folder)], check=False, capture_output=True, text=True,
+                             env=env)
+    try:
+        assert started.returncode == 0, started.stderr
+        yield started.stdout.strip().removeprefix(f"export {export}="), folder
+    finally:
+        subprocess.run(["bash", str(script), "stop", str(folder)], check=False, capture_output=True, env=env)
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @dataclass

@@ -12,26 +12,18 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
-import time
 import urllib.request
 
 import pytest
-from conftest import clean_env
+from conftest import clean_env, free_port, wait_for_http
 
 from topoloc.viewer.browser import chromium_missing, console_errors, start_chromium
 
 pytestmark = [pytest.mark.slow, pytest.mark.browser]
 
 GRAPH = "results/helsinki/graph/graph.graphml"
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 def _log_a_model(root) -> str:
@@ -69,7 +61,7 @@ def mlflow_ui(workflow):
     if reason:
         pytest.skip(reason)
     workflow.run(GRAPH, "--cores", "2")
-    port = _free_port()  # the server starts while the report is built and the model logged (it reads the store live)
+    port = free_port()  # the server starts while the report is built and the model logged (it reads the store live)
     server = subprocess.Popen([sys.executable, "-m", "mlflow", "ui", "--backend-store-uri", "sqlite:///results/mlflow.db",
                                "--host", "127.0.0.1", "--port", str(port), "--workers", "1"], cwd=workflow.root,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=clean_env(), start_new_session=True)
@@ -77,15 +69,7 @@ def mlflow_ui(workflow):
     try:
         workflow.run("--report", "report.html", GRAPH)
         model_run = _log_a_model(workflow.root)
-        deadline = time.monotonic() + 120
-        while True:
-            try:
-                urllib.request.urlopen(f"{base}/health", timeout=2)
-                break
-            except OSError:
-                assert server.poll() is None, "mlflow ui exited"
-                assert time.monotonic() < deadline, "mlflow ui did not answer within 120 s"
-                time.sleep(0.5)
+        wait_for_http(f"{base}/health", server, "mlflow ui")
         yield workflow.root, base, model_run
     finally:
         os.killpg(server.pid, signal.SIGTERM)

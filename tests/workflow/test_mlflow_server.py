@@ -11,14 +11,12 @@ from __future__ import annotations
 import glob
 import importlib.util
 import os
-import shutil
-import socket
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import pytest
+from conftest import script_service
 
 REPO = Path(__file__).resolve().parents[2]
 SCRIPT = REPO / "cluster" / "mlflow_server.sh"
@@ -32,25 +30,11 @@ pytestmark = [
 ]
 
 
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 @pytest.fixture()
 def server():
     """The tracking URI of a fresh server; PostgreSQL and the server are stopped afterwards, however the test ends."""
-    folder = Path(tempfile.mkdtemp(prefix="topoloc-mlflow-", dir="/tmp"))  # user postgres must enter it
-    folder.chmod(0o755)
-    env = {**os.environ, "PG_PORT": str(_free_port()), "MLFLOW_PORT": str(_free_port())}
-    started = subprocess.run(["bash", str(SCRIPT), "start", str(folder)], check=False, capture_output=True, text=True, env=env)
-    try:
-        assert started.returncode == 0, started.stderr
-        yield started.stdout.strip().removeprefix("export MLFLOW_TRACKING_URI=")
-    finally:
-        subprocess.run(["bash", str(SCRIPT), "stop", str(folder)], check=False, capture_output=True, env=env)
-        shutil.rmtree(folder, ignore_errors=True)
+    with script_service(SCRIPT, "topoloc-mlflow-", ("PG_PORT", "MLFLOW_PORT"), "MLFLOW_TRACKING_URI") as (uri, _):
+        yield uri
 
 
 def test_stages_at_four_cores_arrive_complete_on_the_server(workflow, server):

@@ -12,13 +12,12 @@ import importlib.util
 import os
 import re
 import shutil
-import socket
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import pytest
+from conftest import script_service
 
 REPO = Path(__file__).resolve().parents[2]
 SCRIPT = REPO / "cluster" / "slurm_local.sh"
@@ -39,26 +38,11 @@ pytestmark = [
 ]
 
 
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 @pytest.fixture()
 def slurm():
     """SLURM_CONF of a fresh one-node cluster and its folder; the daemons are stopped afterwards."""
-    folder = Path(tempfile.mkdtemp(prefix="topoloc-slurm-", dir="/tmp"))
-    folder.chmod(0o755)
-    env = {**os.environ, "SLURMCTLD_PORT": str(_free_port()), "SLURMD_PORT": str(_free_port())}
-    started = subprocess.run(["bash", str(SCRIPT), "start", str(folder)], check=False, capture_output=True,
-                             text=True, env=env)
-    try:
-        assert started.returncode == 0, started.stderr
-        yield started.stdout.strip().removeprefix("export SLURM_CONF="), folder
-    finally:
-        subprocess.run(["bash", str(SCRIPT), "stop", str(folder)], check=False, capture_output=True, env=env)
-        shutil.rmtree(folder, ignore_errors=True)
+    with script_service(SCRIPT, "topoloc-slurm-", ("SLURMCTLD_PORT", "SLURMD_PORT"), "SLURM_CONF") as started:
+        yield started
 
 
 def two_regions(root: Path, kitti_map: Path) -> str:
