@@ -12,6 +12,7 @@ from tests.conftest import make_config
 from topoloc.errors import InputError
 from topoloc.experiments import city, simulated
 from topoloc.experiments.many_starts import targets
+from topoloc.experiments.maps import grid_osm
 
 
 def _conf(**experiment):
@@ -20,9 +21,9 @@ def _conf(**experiment):
 
 
 def test_grid_map_is_the_same_for_the_same_seed(tmp_path):
-    first = simulated.grid_osm(tmp_path / "a.osm").read_text()
-    assert first == simulated.grid_osm(tmp_path / "b.osm").read_text()
-    assert first != simulated.grid_osm(tmp_path / "c.osm", seed=1).read_text()
+    first = grid_osm(tmp_path / "a.osm").read_text()
+    assert first == grid_osm(tmp_path / "b.osm").read_text()
+    assert first != grid_osm(tmp_path / "c.osm", seed=1).read_text()
     assert first.count("<node ") == 63 and first.count("<way ") == 16
 
 
@@ -77,7 +78,7 @@ def test_simulated_summary_mean_and_spread_over_levels(simulated_levels):
 
 
 def test_city_level_job_and_summary(tmp_path):
-    osm = simulated.grid_osm(tmp_path / "grid.osm")
+    osm = grid_osm(tmp_path / "grid.osm")
     base, experiments = _conf(city={"maps": ["grid"], "osm": {"grid": str(osm)}, "levels": ["low"], "drives": 1,
                                     "start_every_m": 1500.0})
     conf = {**base, "city": experiments["city"], "level": "low"}

@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from topoloc.experiments.many_starts import start_rows, targets
-from topoloc.experiments.maps import grid_osm, load_map  # noqa: F401 (grid_osm: also here, as before)
+from topoloc.experiments.maps import load_map
 from topoloc.experiments.summary import write_summary
 from topoloc.io import write_json, write_text
 from topoloc.localization.evaluation import DriveTruth, Judge, start_frames
