@@ -32,11 +32,10 @@ Where the map cannot decide, the oracle says so: a start that is never left
 with one place although the drive turned at least ``ambiguous_turns`` times is
 ``ambiguous`` (another walk fits the whole drive, such as the mirror walk of an
 out-and-back on a dual carriageway: the same loop the other way round on the
-other carriageway), one with fewer turns ``open``. Before 2026-11 the oracle
-compared the lengths of the map's edges, so where side roads joined (which
-differs between the two carriageways of a real dual carriageway) told the
-mirror walks apart; a vehicle cannot sense that, and such starts now stay
-unresolved.
+other carriageway), one with fewer turns ``open``. Lengths are compared
+between turns, not per map edge: where side roads join (which differs between
+the two carriageways of a real dual carriageway) a vehicle cannot sense, so it
+does not tell the mirror walks apart.
 """
 
 from __future__ import annotations
