@@ -133,5 +133,12 @@ def test_filters_with_top_places_rank_them():
         assert len({p.state for p in places}) == 3 and (np.diff(probs) <= 1e-9).all() and probs.sum() <= 1.0 + 1e-5, (cls, places)
         assert places[0].state == edge and abs(places[0].probability - confidence) < 1e-5, (cls, places, edge, confidence)
         assert all(p.xy is not None and np.isfinite(p.xy).all() for p in places)
-        merged = filt.top_places(3, 50.0)
-        assert merged[0].probability >= places[0].probability - 1e-9 and len(merged) <= len(places) + 2
+        # merging within the spread of the unmerged top places: the top place absorbs the other two (no mass lost),
+        # at most k places are left, no mass is made up, and what else is kept lies farther off than the radius
+        xy = np.array([p.xy for p in places])
+        radius = float(np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1)).max()) + 1.0
+        merged = filt.top_places(3, radius)
+        merged_probs = np.array([p.probability for p in merged])
+        assert 1 <= len(merged) <= 3 and merged_probs.sum() <= 1.0 + 1e-5, (cls, merged)
+        assert merged[0].state == places[0].state and merged[0].probability >= probs.sum() - 1e-6, (cls, merged, places)
+        assert all(np.hypot(*(np.subtract(p.xy, merged[0].xy))) > radius for p in merged[1:]), (cls, merged, radius)
