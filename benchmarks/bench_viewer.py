@@ -16,8 +16,12 @@ import argparse
 import statistics
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from benchmarks.markdown import add_out_option, markdown_copy
+
+if TYPE_CHECKING:
+    from selenium.webdriver.remote.webdriver import WebDriver
 
 SLIDER_JS = """
 const done = arguments[arguments.length - 1];
@@ -29,7 +33,7 @@ requestAnimationFrame(() => requestAnimationFrame(() => done(performance.now() -
 """
 
 
-def measure(driver, path: Path, loads: int, moves: int) -> dict[str, float]:
+def measure(driver: WebDriver, path: Path, loads: int, moves: int) -> dict[str, float]:
     """Size (MB), open time (s, median of ``loads``) and slider answer (ms, median and worst of ``moves``)."""
     import random
 

@@ -45,10 +45,12 @@ def build_graph(nodes: pd.DataFrame, records: list[dict[str, Any]], geometry: li
 
 
 def records_of(graph: RoadGraph) -> list[dict[str, Any]]:
+    """The edges of ``graph`` as plain records (one dict of its columns per edge, in edge-id order)."""
     return graph.edges.reset_index(drop=True).to_dict("records")
 
 
 def copy_graph(graph: RoadGraph) -> RoadGraph:
+    """A deep copy of ``graph`` (its nodes, edges and geometry), rebuilt so nothing is shared with it."""
     return build_graph(graph.nodes.copy(), records_of(graph), [g.copy() for g in graph.geometry], graph)
 
 
@@ -66,6 +68,7 @@ def _along(coords: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def densify(coords: NDArray[np.float64], step_m: float = 5.0) -> NDArray[np.float64]:
+    """The polyline ``coords`` ``(n, 2)`` with points added at most ``step_m`` apart along it (its own points kept)."""
     cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(coords, axis=0).T))])
     s = np.union1d(np.linspace(0.0, cum[-1], max(2, int(np.ceil(cum[-1] / step_m)) + 1)), cum)
     return np.column_stack([np.interp(s, cum, coords[:, 0]), np.interp(s, cum, coords[:, 1])])
