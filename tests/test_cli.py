@@ -14,7 +14,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent / "localization"))
 sys.path.insert(0, str(Path(__file__).resolve().parent / "trajectory"))
 
-from localization_helpers import drive_along, irregular_grid, mirror_loop
+from localization_helpers import drive_along, dual_carriageway, irregular_grid
 
 from topoloc.cli import main
 from topoloc.graph.road_graph import RoadGraph
@@ -217,10 +217,9 @@ def test_long_stop_and_reversing_stretch(small_map, capsys, tmp_path):
 def test_a_mirror_drive_prints_both_places(capsys, tmp_path):
     """An out-and-back on a dual carriageway that its mirror walk explains as well: unsure, both places printed and in
     the CSV's place columns."""
-    graph = mirror_loop()
+    graph, _, _ = dual_carriageway(400.0, round_ends=True)
     graph.save_graphml(tmp_path / "mirror.graphml")
-    edges = {(0, 1): 0, (1, 4): 1, (4, 2): 2, (2, 3): 3, (3, 5): 4, (5, 0): 5}
-    xy, yaw, _ = drive_along(graph, [0, 1, 4, 2, 3], edges, start_m=50.0)
+    xy, yaw, _, _ = drive_along(graph, [0, 1, 4, 2, 3], start_m=50.0)
     keep = xy[:, 0] >= 100.0
     write_poses(tmp_path / "mirror.txt", poses_from_planar(xy[keep] - xy[0], yaw[keep]))
     code, out, err = run_cli(capsys, "--graph", tmp_path / "mirror.graphml", "--poses", tmp_path / "mirror.txt", "--out", tmp_path / "m")

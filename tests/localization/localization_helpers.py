@@ -38,27 +38,63 @@ def irregular_grid():
     return make_graph(coords, edges), edges
 
 
-def mirror_loop(length: float = 400.0, gap: float = 17.0):
-    """A dual carriageway: two one-way roads ``gap`` metres apart, east 0 -> 1 at y = 0 (edge 0) and west 2 -> 3 at
-    y = ``gap`` (edge 3), joined by a U-turn at each end (east: 1 -> 4 -> 2, edges 1, 2; west: 3 -> 5 -> 0, edges 4,
-    5). The map is point-symmetric (a half turn about its centre maps it onto itself), so every walk has a mirror
-    walk on the other carriageway that odometry alone cannot tell from it."""
+def dual_carriageway(length: float = 900.0, gap: float = 17.0, south_sides: tuple[float, ...] = (),
+                     north_sides: tuple[float, ...] = (), round_ends: bool = False):
+    """A dual carriageway: an eastbound one-way road at y = 0 and a westbound one at y = ``gap``, joined at each end
+    by a one-way U-turn (straight across, or with ``round_ends`` via a node ``gap / 2`` beyond the end), and two-way
+    side roads (150 m) off the south and north carriageways at ``south_sides`` and ``north_sides`` (x). Without side
+    roads the map is point-symmetric (a half turn about its centre maps it onto itself), so every walk has a mirror
+    walk on the other carriageway that odometry alone cannot tell from it; side roads at unmirrored places keep it
+    so for a vehicle that drives straight past them.
+
+    Nodes: the south carriageway's by x, the north one's from east to west, the U-turn nodes (east, west), the side
+    roads' ends; edges in driving order round the loop (south, east U-turn, north, west U-turn), then the side
+    roads. Without side roads and with ``round_ends``: edges 0 (0 -> 1, east), 1, 2 (1 -> 4 -> 2), 3 (2 -> 3, west),
+    4, 5 (3 -> 5 -> 0). Returns the graph and the node ids by x of the south and the north carriageway."""
+    coords: dict[int, tuple[float, float]] = {}
+
+    def node(x: float, y: float) -> int:
+        coords[len(coords)] = (float(x), float(y))
+        return len(coords) - 1
+
+    sx, nx = sorted({0.0, length, *south_sides}), sorted({0.0, length, *north_sides})
+    south = {x: node(x, 0.0) for x in sx}
+    north = {x: node(x, gap) for x in reversed(nx)}
     half = gap / 2.0
-    coords = {0: (0.0, 0.0), 1: (length, 0.0), 2: (length, gap), 3: (0.0, gap), 4: (length + half, half), 5: (-half, half)}
-    return make_graph(coords, [(0, 1, 1), (1, 4, 1), (4, 2, 1), (2, 3, 1), (3, 5, 1), (5, 0, 1)])
+    east_end, west_end = (node(length + half, half), node(-half, half)) if round_ends else (None, None)
+
+    def u_turn(a: int, via: int | None, b: int) -> list[tuple[int, int, int]]:
+        return [(a, b, 1)] if via is None else [(a, via, 1), (via, b, 1)]
+
+    edges = [(south[a], south[b], 1) for a, b in zip(sx[:-1], sx[1:])]
+    edges += u_turn(south[length], east_end, north[length])
+    edges += [(north[b], north[a], 1) for a, b in zip(nx[:-1], nx[1:])][::-1]
+    edges += u_turn(north[0.0], west_end, south[0.0])
+    edges += [(south[x], node(x, -150.0)) for x in south_sides] + [(north[x], node(x, gap + 150.0)) for x in north_sides]
+    return make_graph(coords, edges), south, north
 
 
-def drive_along(graph, route, edges, start_m: float = 0.0, every_m: float = 1.0):
-    """Points every ``every_m`` along the nodes of ``route`` (from ``start_m`` on), their heading of travel and the
-    true edge of each (``edges[(a, b)]``)."""
+def loop_nodes(south: dict[float, int], north: dict[float, int], laps: int) -> list[int]:
+    """Node sequence of ``laps`` laps east on the south carriageway and back west on the north one (straight-across
+    U-turns)."""
+    lap = [south[x] for x in sorted(south)] + [north[x] for x in sorted(north, reverse=True)]
+    return lap * laps + [lap[0]]
+
+
+def drive_along(graph, route: list[int], start_m: float = 0.0, every_m: float = 1.0):
+    """Frames every ``every_m`` metres along the roads between the nodes of ``route``, from ``start_m`` on: their
+    positions, heading of travel, true edge (the road between the two nodes, either way) and metres driven from the
+    first frame."""
     xy, labels = [], []
+    u, v = graph.edges.u.to_numpy(), graph.edges.v.to_numpy()
     for a, b in zip(route[:-1], route[1:]):
+        edge = int(np.flatnonzero(((u == a) & (v == b)) | ((u == b) & (v == a)))[0])
         p, q = graph.nodes.loc[a, ["x", "y"]].to_numpy(float), graph.nodes.loc[b, ["x", "y"]].to_numpy(float)
         n = max(1, int(round(np.hypot(*(q - p)) / every_m)))
         xy.append(p + (q - p) * np.arange(n)[:, None] / n)
-        labels += [edges[(a, b)]] * n
+        labels += [edge] * n
     xy, labels = np.vstack(xy), np.asarray(labels, np.int64)
     driven = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
-    keep = driven >= start_m
+    keep = driven >= start_m - 1e-9
     step = np.diff(xy, axis=0, append=xy[-1:] + (xy[-1:] - xy[-2:-1]))
-    return xy[keep], np.arctan2(step[:, 1], step[:, 0])[keep], labels[keep]
+    return xy[keep], np.arctan2(step[:, 1], step[:, 0])[keep], labels[keep], driven[keep] - driven[keep][0]

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-from localization_helpers import drive_along, mirror_loop
+from localization_helpers import drive_along, dual_carriageway
 
 from topoloc.config import load
 from topoloc.localization.drive_on_map import write_geojson
@@ -17,15 +17,12 @@ from topoloc.localizer import Answer, Place, Track, merge_places
 from topoloc.motion.poses import Odometry
 from topoloc.registry import make
 
-EDGES = {(0, 1): 0, (1, 4): 1, (4, 2): 2, (2, 3): 3, (3, 5): 4, (5, 0): 5}
-
-
 @pytest.fixture(scope="module")
 def mirror():
     """The mirror map and an out-and-back: 350 m east on edge 0 from x = 50, the east U-turn, 300 m west on edge 3
     (ending at x = 100); the odometry in a frame turned by 40 degrees and shifted (the filters never see the map's)."""
-    graph = mirror_loop()
-    xy, yaw, edge = drive_along(graph, [0, 1, 4, 2, 3], EDGES, start_m=50.0)
+    graph, _, _ = dual_carriageway(400.0, round_ends=True)
+    xy, yaw, edge, _ = drive_along(graph, [0, 1, 4, 2, 3], start_m=50.0)
     end = np.flatnonzero((edge == 3) & (xy[:, 0] <= 100.0))[0]
     xy, yaw, edge = xy[:end + 1], yaw[:end + 1], edge[:end + 1]
     turn = np.radians(40.0)

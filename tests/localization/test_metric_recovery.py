@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from localization_helpers import irregular_grid
-from test_oracle import drive_along, dual_carriageway, loop_nodes
+from localization_helpers import drive_along, dual_carriageway, irregular_grid, loop_nodes
 
 from topoloc.config import load
 from topoloc.localization.evaluation import Judge, localized_step
@@ -87,7 +86,7 @@ def test_a_mirror_walk_does_not_end_sure():
     # three laps of an out-and-back on a dual carriageway with side roads at unmirrored places: the loop the other
     # way round on the other carriageway fits every turn and length (the oracle: ambiguous)
     graph, south, north = dual_carriageway(south_sides=(200.0, 300.0, 450.0), north_sides=(380.0, 520.0, 780.0))
-    xy, edge, driven = drive_along(graph, loop_nodes(south, north, 3))
+    xy, _, edge, driven = drive_along(graph, loop_nodes(south, north, 3), start_m=30.0)
     smooth = xy.copy()
     for _ in range(6):
         smooth[1:-1] = (smooth[:-2] + smooth[1:-1] + smooth[2:]) / 3.0

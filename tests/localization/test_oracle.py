@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from localization_helpers import make_graph
+from localization_helpers import drive_along, dual_carriageway, loop_nodes, make_graph
 
 from topoloc.localization.connectivity import directed_edges
 from topoloc.localization.oracle import Oracle, true_path
@@ -25,25 +25,10 @@ def mirror_corridors():
     return make_graph(coords, edges)
 
 
-def drive_along(graph, nodes, step=1.0, start_offset=30.0):
-    """Frames every ``step`` metres along the roads between ``nodes`` (starting ``start_offset`` into the first)."""
-    xy, edge = [], []
-    for a, b in zip(nodes[:-1], nodes[1:]):
-        e = int(np.flatnonzero(((graph.edges.u == a) & (graph.edges.v == b)) | ((graph.edges.u == b) & (graph.edges.v == a)))[0])
-        p, q = graph.nodes.loc[a, ["x", "y"]].to_numpy(float), graph.nodes.loc[b, ["x", "y"]].to_numpy(float)
-        n = int(np.hypot(*(q - p)) / step)
-        xy.append(p + (q - p) * np.arange(n)[:, None] / n)
-        edge += [e] * n
-    xy = np.vstack(xy)[int(start_offset / step):]
-    edge = np.asarray(edge)[int(start_offset / step):]
-    driven = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
-    return xy, edge, driven
-
-
 def test_mirror_corridors_only_the_late_turn_tells():
     graph = mirror_corridors()
     states = directed_edges(graph)
-    xy, edge, driven = drive_along(graph, [0, 1, 2, 3, 4])
+    xy, _, edge, driven = drive_along(graph, [0, 1, 2, 3, 4], start_m=30.0)
     path = true_path(graph, edge, xy, driven)
     assert (path.state == 2 * edge).all()  # driven u -> v on every road
     result = Oracle(graph, states, 15.0, 0.05).count(path, 0, confirm_m=0.0)
@@ -58,7 +43,7 @@ def test_mirror_corridors_only_the_late_turn_tells():
 def test_first_road_partly_driven_and_lengths_within_tolerance():
     graph = mirror_corridors()
     states = directed_edges(graph)
-    xy, edge, driven = drive_along(graph, [0, 1, 2, 3, 4], start_offset=60.0)
+    xy, _, edge, driven = drive_along(graph, [0, 1, 2, 3, 4], start_m=60.0)
     path = true_path(graph, edge, xy, driven)
     oracle = Oracle(graph, states, 15.0, 0.05)
     result = oracle.count(path, 0, confirm_m=0.0)
@@ -71,43 +56,22 @@ def test_first_road_partly_driven_and_lengths_within_tolerance():
 def test_too_little_driven_is_never_resolved():
     graph = mirror_corridors()
     states = directed_edges(graph)
-    xy, edge, driven = drive_along(graph, [0, 1, 2, 3, 4])
+    xy, _, edge, driven = drive_along(graph, [0, 1, 2, 3, 4], start_m=30.0)
     path = true_path(graph, edge, xy, driven)
     result = Oracle(graph, states, 15.0, 0.05).count(path, len(edge) - 5, confirm_m=0.0)  # 5 m before the end
     assert result.localized_frame is None and np.isnan(result.localized_m) and result.walks[-1] > 1
 
 
-def dual_carriageway(length=900.0, gap=17.0, south_sides=(300.0,), north_sides=(520.0,)):
-    """An out-and-back on a dual carriageway: an eastbound one-way road (y = 0) and a westbound one (y = ``gap``),
-    one-way U-turn links at both ends, and two-way side roads (150 m) off the south and north carriageways at
-    ``south_sides`` and ``north_sides`` (x). Returns the graph and the node ids by x of each carriageway."""
-    coords, edges = {}, []
-
-    def node(x, y):
-        coords[len(coords)] = (float(x), float(y))
-        return len(coords) - 1
-
-    sx, nx = sorted({0.0, length, *south_sides}), sorted({0.0, length, *north_sides})
-    south, north = {x: node(x, 0.0) for x in sx}, {x: node(x, gap) for x in nx}
-    edges += [(south[a], south[b], 1) for a, b in zip(sx[:-1], sx[1:])]
-    edges += [(north[b], north[a], 1) for a, b in zip(nx[:-1], nx[1:])]
-    edges += [(south[length], north[length], 1), (north[0.0], south[0.0], 1)]
-    edges += [(south[x], node(x, -150.0)) for x in south_sides] + [(north[x], node(x, gap + 150.0)) for x in north_sides]
-    return make_graph(coords, edges), south, north
-
-
-def loop_nodes(south, north, laps):
-    """Node sequence of ``laps`` laps east on the south carriageway and back west on the north one."""
-    lap = [south[x] for x in sorted(south)] + [north[x] for x in sorted(north, reverse=True)]
-    return lap * laps + [lap[0]]
+#: Side roads of the oracle's dual carriageway, where the mirror image (x -> 900 - x) has none.
+SIDES = {"south_sides": (300.0,), "north_sides": (520.0,)}
 
 
 def test_mirror_walk_of_a_dual_carriageway_stays_ambiguous():
     # side roads where the mirror image (x -> 900 - x) has none: where roads join is no evidence for a vehicle that
     # drives straight past them, so the walk on the other carriageway, the other way round, fits as well
-    graph, south, north = dual_carriageway()
+    graph, south, north = dual_carriageway(**SIDES)
     states = directed_edges(graph)
-    xy, edge, driven = drive_along(graph, loop_nodes(south, north, 3))
+    xy, _, edge, driven = drive_along(graph, loop_nodes(south, north, 3), start_m=30.0)
     path = true_path(graph, edge, xy, driven)
     oracle = Oracle(graph, states, 15.0, 0.05)
     for start in range(0, len(edge) - 100, 97):
@@ -121,11 +85,11 @@ def test_mirror_walk_of_a_dual_carriageway_stays_ambiguous():
 def test_a_turn_the_mirror_cannot_make_resolves_it():
     # the same loop, then a left turn into the north side road at x = 520: its mirror (x = 380 on the south
     # carriageway) has no road, so from the turn on one walk is left
-    graph, south, north = dual_carriageway()
+    graph, south, north = dual_carriageway(**SIDES)
     states = directed_edges(graph)
     side = int(graph.edges.v.iat[-1])
     nodes = loop_nodes(south, north, 1) + [south[x] for x in sorted(south)[1:]] + [north[900.0], north[520.0], side]
-    xy, edge, driven = drive_along(graph, nodes)
+    xy, _, edge, driven = drive_along(graph, nodes, start_m=30.0)
     path = true_path(graph, edge, xy, driven)
     result = Oracle(graph, states, 15.0, 0.05).count(path, 0, confirm_m=50.0)
     turn_at = driven[np.flatnonzero(edge == len(graph.edges) - 1)[0]]
@@ -139,7 +103,7 @@ def test_roads_joining_on_a_straight_are_no_evidence():
               10: (0.0, 1000.0), 11: (400.0, 1000.0), 12: (400.0, 1100.0)}
     graph = make_graph(coords, [(0, 1, 1), (1, 2, 1), (2, 3, 1), (1, 4, 1), (10, 11, 1), (11, 12, 1)])
     states = directed_edges(graph)
-    xy, edge, driven = drive_along(graph, [0, 1, 2, 3], start_offset=10.0)
+    xy, _, edge, driven = drive_along(graph, [0, 1, 2, 3], start_m=10.0)
     result = Oracle(graph, states, 15.0, 0.05).count(true_path(graph, edge, xy, driven), 0, confirm_m=0.0)
     before = driven < 389.0
     assert (result.places[before][driven[before] > 250.0] == 2).all()  # both straights are long enough
