@@ -1,12 +1,12 @@
 """Benchmark of the metric filter where the map explains the drive badly: confident wrong answers and recovery.
 
-A quick harness of lane ``filter`` (issue 38, deliverable 3), written before the map-error generator
-(:mod:`topoloc.odometry.map_errors`, ``bench_map_errors``) was there; the ablation table in docs/localization.md
-("The metric filter on maps with errors") comes from it. Drives are simulated on the true map (random walks of
-1.5-2.5 km, medium odometry noise) and localized on a perturbed copy that keeps the road ids: nodes moved
+The ablation table in docs/localization.md ("The metric filter on maps with errors") comes from it;
+``bench_map_errors`` (on :mod:`topoloc.odometry.map_errors`) is the benchmark of the map-error types. Drives are
+simulated on the true map (random walks of 1.5-2.5 km, medium odometry noise) and localized on a perturbed copy that keeps the road ids: nodes moved
 (``node`` m sd per axis, the geometry follows), inner vertices moved (``vertex``), Douglas-Peucker at
 ``simplify`` m, ``phantom`` x roads of straight two-way links that do not exist; and each drive leaves the map once
-for a 120 m loop (a parking lot: 30 m out to the right, 60 m back, onto the road again, then driven on).
+for a 120 m loop (a parking lot: 30 m out to the right, 60 m back, onto the road again, then driven on;
+:func:`topoloc.odometry.map_error_drives.off_map_loop`).
 
     python -m benchmarks.bench_filter_recovery [--graph results/helsinki/graph/graph.graphml] [--level medium]
         [--drives 2] [--seeds 1,2] [--start-every 300] [--set localization.metric.heading_sigma_deg=8 ...]
@@ -17,6 +17,8 @@ wrong: confidence >= 0.9 and wrong, of all answers; off the map every road is wr
 onto the map: localized again within 1.5x the oracle's distance from there, the median ratio, never), and the
 CPU seconds of the filter; then the recoveries of the start at frame 0 of each drive.
 """
+
+from __future__ import annotations
 
 import argparse
 import copy
@@ -35,6 +37,7 @@ from topoloc.localization.evaluation import Judge, localized_step, start_frames
 from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.roadmap import RoadMap
 from topoloc.motion.noise import OdometryNoise, integrate_odometry
+from topoloc.odometry.map_error_drives import off_map_loop
 from topoloc.odometry.simulate import NOISE_LEVELS, simulate_pattern_drive
 from topoloc.registry import make
 
@@ -46,76 +49,75 @@ LEVELS = {"none": dict(node=0.0, vertex=0.0, simplify=0.0, phantom=0.0, detour=0
           "geom": dict(node=2.5, vertex=1.0, simplify=3.0, phantom=0.0, detour=0.0),
           "medium": dict(node=2.5, vertex=1.0, simplify=3.0, phantom=0.08, detour=1.0)}
 
-def perturb(graph, rng, node, vertex, simplify, phantom):
+
+def perturb(graph: RoadGraph, rng: np.random.Generator, node: float, vertex: float, simplify: float,
+            phantom: float) -> RoadGraph:
     """The map a localizer sees: nodes moved (sd ``node`` m), inner vertices (``vertex``), simplified, phantom roads."""
     g = copy.deepcopy(graph)
     nodes = g.nodes.copy()
     disp = {n: rng.normal(0, node, 2) for n in nodes.index}
-    nodes["x"] = nodes.x + np.array([disp[n][0] for n in nodes.index]); nodes["y"] = nodes.y + np.array([disp[n][1] for n in nodes.index])
+    nodes["x"] = nodes.x + np.array([disp[n][0] for n in nodes.index])
+    nodes["y"] = nodes.y + np.array([disp[n][1] for n in nodes.index])
     geom, lengths = [], []
     for e, pts in enumerate(g.geometry):
         u, v = int(g.edges.u.iat[e]), int(g.edges.v.iat[e])
-        seg = np.concatenate([[0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))]); f = seg / max(seg[-1], 1e-9)
+        seg = np.concatenate([[0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+        f = seg / max(seg[-1], 1e-9)
         p = pts + (1 - f)[:, None] * disp[u] + f[:, None] * disp[v]
         if len(p) > 2:
             p[1:-1] += rng.normal(0, vertex, (len(p) - 2, 2))
             if simplify > 0:
                 p = np.asarray(shapely.LineString(p).simplify(simplify).coords)
-        geom.append(p); lengths.append(float(np.hypot(*np.diff(p, axis=0).T).sum()))
-    edges = g.edges.copy(); edges["length_m"] = lengths
+        geom.append(p)
+        lengths.append(float(np.hypot(*np.diff(p, axis=0).T).sum()))
+    edges = g.edges.copy()
+    edges["length_m"] = lengths
     if phantom > 0:  # roads that do not exist: straight two-way links between nodes 40-150 m apart
-        xy = nodes[["x", "y"]].to_numpy(float); ids = nodes.index.to_numpy()
+        xy = nodes[["x", "y"]].to_numpy(float)
+        ids = nodes.index.to_numpy()
         linked = set(zip(edges.u, edges.v)) | set(zip(edges.v, edges.u))
-        want = int(round(phantom * len(edges))); new = []
+        want = int(round(phantom * len(edges)))
+        new = []
         for _ in range(50 * want):
-            if len(new) >= want: break
-            a, b = rng.choice(len(ids), 2, replace=False); d = float(np.hypot(*(xy[a] - xy[b])))
+            if len(new) >= want:
+                break
+            a, b = rng.choice(len(ids), 2, replace=False)
+            d = float(np.hypot(*(xy[a] - xy[b])))
             if 40 <= d <= 150 and (ids[a], ids[b]) not in linked:
-                linked |= {(ids[a], ids[b]), (ids[b], ids[a])}; new.append((a, b, d))
+                linked |= {(ids[a], ids[b]), (ids[b], ids[a])}
+                new.append((a, b, d))
         rows = []
         for a, b, d in new:
-            r = edges.iloc[0].copy(); r["u"], r["v"], r["length_m"], r["oneway"] = ids[a], ids[b], d, 0
-            rows.append(r); geom.append(np.array([xy[a], xy[b]]))
+            r = edges.iloc[0].copy()
+            r["u"], r["v"], r["length_m"], r["oneway"] = ids[a], ids[b], d, 0
+            rows.append(r)
+            geom.append(np.array([xy[a], xy[b]]))
         if rows:
-            edges = pd.concat([edges, pd.DataFrame(rows)], ignore_index=True); edges.index.name = "edge_id"
+            edges = pd.concat([edges, pd.DataFrame(rows)], ignore_index=True)
+            edges.index.name = "edge_id"
     g2 = RoadGraph(nodes, edges, geom, g.crs, g.virtual_node_spacing_m)
     deg = pd.Series(0, index=nodes.index)
-    for u, v in zip(edges.u, edges.v): deg[u] += 1; deg[v] += 1
+    for u, v in zip(edges.u, edges.v):
+        deg[u] += 1
+        deg[v] += 1
     g2.nodes["degree"] = deg
     return g2
 
-def add_detour(xy, yaw, edge, rng, at_m, back_m=60.0, out_m=30.0):
-    """A loop off the map to the right (a parking lot, a private road) from the frame at at_m back to the
-    frame back_m earlier, which is then driven again. Returns xy, yaw, edge (-1 off the map), rejoin frame."""
-    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
-    k = int(np.searchsorted(cum, at_m)); j = int(np.searchsorted(cum, at_m - back_m))
-    h = np.arctan2(*(xy[k] - xy[j])[::-1]); right = np.array([np.sin(h), -np.cos(h)])
-    way = [xy[k], xy[k] + right * out_m, xy[j] + right * out_m, xy[j]]
-    pts = [way[0]]
-    for a, b in zip(way[:-1], way[1:]):
-        n = max(1, int(np.hypot(*(b - a))))
-        pts += list(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
-    pts = np.asarray(pts)
-    sm = pts.copy()
-    for _ in range(3):
-        sm[1:-1] = (sm[:-2] + sm[1:-1] + sm[2:]) / 3.0
-    d = np.diff(sm, axis=0); loop_yaw = np.arctan2(d[:, 1], d[:, 0])
-    loop_xy = sm[1:-1]; loop_yaw = loop_yaw[1:]
-    new_xy = np.concatenate([xy[:k + 1], loop_xy, xy[j:]])
-    new_yaw = np.unwrap(np.concatenate([yaw[:k + 1], loop_yaw, yaw[j:]]))
-    new_edge = np.concatenate([edge[:k + 1], np.full(len(loop_xy), -1), edge[j:]])
-    return new_xy, new_yaw, new_edge, k + 1 + len(loop_xy)
 
-def run(conf, graph, level, n_drives, seed, start_every=300.0, localizer="metric", detour=True, length=(1500, 2500)):
+def run(conf: dict, graph: RoadGraph, level: str, n_drives: int, seed: int, start_every: float = 300.0,
+        localizer: str = "metric", detour: bool = True, length: tuple[float, float] = (1500, 2500)
+        ) -> tuple[pd.DataFrame, pd.DataFrame, float]:
     """One seed's drives at one map-error level: the per-start table, the recoveries after the loop, the CPU."""
-    ev = conf["localization"]["evaluate"]; lconf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
+    ev = conf["localization"]["evaluate"]
+    lconf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
     rng = np.random.default_rng(seed)
     err = LEVELS[level]
     mapg = perturb(graph, rng, err["node"], err["vertex"], err["simplify"], err["phantom"]) if err["node"] + err["phantom"] > 0 else graph
     road = RoadMap(mapg, conf["localization"]["decode"]["u_turns"])
     oracle = Oracle(mapg, road.states, ev["oracle"]["angle_tol_deg"], ev["oracle"]["length_tol"])
     judge = Judge(mapg, ev["node_tolerance_m"])
-    loc = make(localizer); loc.reset(road, lconf)
+    loc = make(localizer)
+    loc.reset(road, lconf)
     rows, recov, cpu = [], [], 0.0
     for d in range(n_drives):
         L = float(rng.uniform(*length))
@@ -123,11 +125,13 @@ def run(conf, graph, level, n_drives, seed, start_every=300.0, localizer="metric
         xy, yaw, edge = sim.gt_xy, sim.gt_yaw, sim.edge
         rejoin = None
         if detour and err["detour"] > 0 and sim.length_m > 1200:
-            xy, yaw, edge, rejoin = add_detour(xy, yaw, edge, rng, float(rng.uniform(0.35, 0.55)) * sim.length_m)
+            xy, yaw, edge, rejoin = off_map_loop(xy, yaw, edge, float(rng.uniform(0.35, 0.55)) * sim.length_m)
         odo = integrate_odometry(xy, yaw, OdometryNoise.from_dict(sim.noise), rng)
         driven = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
         starts = start_frames(driven, start_every)
-        t0 = time.process_time(); runs = loc.run_starts(odo, road, lconf, starts); cpu += time.process_time() - t0
+        t0 = time.process_time()
+        runs = loc.run_starts(odo, road, lconf, starts)
+        cpu += time.process_time() - t0
         on = edge >= 0
         # the oracle on the on-map part after the detour (or the whole drive)
         first_on = rejoin if rejoin is not None else 0
@@ -141,8 +145,11 @@ def run(conf, graph, level, n_drives, seed, start_every=300.0, localizer="metric
                 limits[s] = np.nan  # starts before the detour: scored on their stretch before it
         rej_oracle = oracle.count(path, 0, ev["confirm_m"]).localized_m if rejoin is not None else np.nan
         for s, obs, track in runs:
-            fr = np.asarray(obs.frame); st = np.asarray(track.state); conf_ = np.asarray(track.confidence)
-            right = np.zeros(len(fr), bool); m = on[fr]
+            fr = np.asarray(obs.frame)
+            st = np.asarray(track.state)
+            conf_ = np.asarray(track.confidence)
+            right = np.zeros(len(fr), bool)
+            m = on[fr]
             right[m] = judge.right(st[m], edge[fr][m], xy[fr][m])
             cw = ~right & (conf_ >= ev["sure"])
             dist = driven[fr] - driven[s]
@@ -150,7 +157,8 @@ def run(conf, graph, level, n_drives, seed, start_every=300.0, localizer="metric
             if rejoin is not None and s >= rejoin - 200 and s < rejoin:
                 continue
             if rejoin is None or s >= rejoin:
-                step = localized_step(right, dist, ev["confirm_m"]); row["loc"] = dist[step] if step is not None else np.nan
+                step = localized_step(right, dist, ev["confirm_m"])
+                row["loc"] = dist[step] if step is not None else np.nan
                 row["oracle"] = limits.get(s, np.nan)
             else:
                 # before the detour: localized before it, and found again after it
@@ -166,7 +174,8 @@ def run(conf, graph, level, n_drives, seed, start_every=300.0, localizer="metric
             rows.append(row)
     return pd.DataFrame(rows), pd.DataFrame(recov), cpu
 
-def summary(tab, rec, cpu):
+
+def summary(tab: pd.DataFrame, rec: pd.DataFrame, cpu: float) -> dict[str, float]:
     """The figures of one setting: localized share and median ratio of the resolved starts, confident wrong, recovery."""
     res = tab[np.isfinite(tab.oracle)]
     out = {"starts": len(tab), "resolved": len(res), "loc_share": float(np.isfinite(res["loc"]).mean()) if len(res) else np.nan,

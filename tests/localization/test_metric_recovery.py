@@ -13,6 +13,7 @@ from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.roadmap import RoadMap
 from topoloc.motion.noise import OdometryNoise, integrate_odometry
 from topoloc.motion.poses import Odometry
+from topoloc.odometry.map_error_drives import off_map_loop
 from topoloc.odometry.simulate import NOISE_LEVELS, simulate_pattern_drive
 from topoloc.registry import make
 
@@ -21,30 +22,6 @@ def conf_slices(**metric):
     conf = {k: load(None)[k] for k in ("localization", "segmentation", "encoding")}
     conf["localization"]["metric"].update(metric)
     return conf
-
-
-def off_map_loop(xy, yaw, edge, at_m, back_m=60.0, out_m=30.0):
-    """Insert a loop off the map (a parking lot the map lacks): from the frame at ``at_m`` out ``out_m`` to the
-    right, back parallel to the road, and onto it again ``back_m`` earlier, which is then driven again. Frames
-    off the map get road -1. Returns xy, yaw, edge and the first frame back on the road."""
-    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
-    k, j = int(np.searchsorted(cum, at_m)), int(np.searchsorted(cum, at_m - back_m))
-    h = np.arctan2(*(xy[k] - xy[j])[::-1])
-    right = np.array([np.sin(h), -np.cos(h)])
-    corners = [xy[k], xy[k] + right * out_m, xy[j] + right * out_m, xy[j]]
-    pts = [corners[0]]
-    for a, b in zip(corners[:-1], corners[1:]):
-        n = max(1, int(np.hypot(*(b - a))))
-        pts += list(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
-    pts = np.asarray(pts)
-    for _ in range(3):  # rounded corners
-        pts[1:-1] = (pts[:-2] + pts[1:-1] + pts[2:]) / 3.0
-    loop_yaw = np.arctan2(*np.diff(pts, axis=0).T[::-1])[1:]
-    loop = pts[1:-1]
-    out_xy = np.concatenate([xy[:k + 1], loop, xy[j:]])
-    out_yaw = np.unwrap(np.concatenate([yaw[:k + 1], loop_yaw, yaw[j:]]))
-    out_edge = np.concatenate([edge[:k + 1], np.full(len(loop), -1), edge[j:]])
-    return out_xy, out_yaw, out_edge, k + 1 + len(loop)
 
 
 def found_again(seed, **metric):

@@ -2,7 +2,8 @@
 
 Public functions: :func:`drive` (one drive of a pattern on the pair's truth, a
 :class:`~topoloc.odometry.simulate.SimulatedDrive`) and :func:`map_truth` (the ground truth on the map a localizer
-sees: per frame the map road and position, or off-map).
+sees: per frame the map road and position, or off-map); :func:`off_map_loop` (a drive that leaves the map for a
+loop and rejoins it).
 
 Patterns (:data:`PATTERNS`), driven like :func:`topoloc.odometry.simulate.simulate_pattern_drive` (corners rounded by
 :func:`topoloc.motion.route.smooth_path`, frames about a metre apart) in a lane ``lane_offset_m`` right of the
@@ -243,3 +244,30 @@ def map_truth(pair: MapPair, edge: NDArray[np.int64], xy: NDArray[np.float64], y
             out_edge[idx[better]] = m
             out_xy[idx[better]] = point[better]
     return out_edge, out_xy
+
+
+def off_map_loop(xy: NDArray[np.float64], yaw: NDArray[np.float64], edge: NDArray[np.int64], at_m: float,
+                 back_m: float = 60.0, out_m: float = 30.0
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], int]:
+    """A drive (frames ``xy``, ``yaw``, true road ``edge``) with a loop off the map inserted (a parking lot the map
+    lacks): from the frame at ``at_m`` metres out ``out_m`` to the right, back parallel to the road, and onto it
+    again ``back_m`` earlier, which is then driven again; corners rounded. Frames off the map get road -1.
+    Returns xy, yaw, edge and the first frame back on the road."""
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+    k, j = int(np.searchsorted(cum, at_m)), int(np.searchsorted(cum, at_m - back_m))
+    h = np.arctan2(*(xy[k] - xy[j])[::-1])
+    right = np.array([np.sin(h), -np.cos(h)])
+    corners = [xy[k], xy[k] + right * out_m, xy[j] + right * out_m, xy[j]]
+    pts = [corners[0]]
+    for a, b in zip(corners[:-1], corners[1:]):
+        n = max(1, int(np.hypot(*(b - a))))
+        pts += list(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
+    pts = np.asarray(pts)
+    for _ in range(3):  # rounded corners
+        pts[1:-1] = (pts[:-2] + pts[1:-1] + pts[2:]) / 3.0
+    loop_yaw = np.arctan2(*np.diff(pts, axis=0).T[::-1])[1:]
+    loop = pts[1:-1]
+    out_xy = np.concatenate([xy[:k + 1], loop, xy[j:]])
+    out_yaw = np.unwrap(np.concatenate([yaw[:k + 1], loop_yaw, yaw[j:]]))
+    out_edge = np.concatenate([edge[:k + 1], np.full(len(loop), -1), edge[j:]])
+    return out_xy, out_yaw, out_edge, k + 1 + len(loop)
