@@ -35,9 +35,11 @@ def test_drive_plan_random_drives_then_a_circuit_and_a_stop_and_reverse():
 
 @pytest.fixture(scope="module")
 def simulated_levels(tmp_path_factory):
-    """Both levels' jobs of the simulated experiment on the grid map: hmm from a start every 400 m, no random drive."""
+    """Both levels' jobs of the simulated experiment on the grid map: hmm from a start every 400 m, one random drive
+    (the oracle resolves none of the starts of the circuit and the stop-and-reverse drive at level low, so without it the
+    localized share is undefined)."""
     tmp = tmp_path_factory.mktemp("simulated")
-    base, experiments = _conf(simulated={"maps": ["grid"], "levels": ["low", "medium"], "drives": 0,
+    base, experiments = _conf(simulated={"maps": ["grid"], "levels": ["low", "medium"], "drives": 1,
                                          "localizers": ["hmm"], "start_every_m": 400.0})
     inputs = {}
     for level in ("low", "medium"):
@@ -51,7 +53,7 @@ def test_simulated_level_job(simulated_levels):
     tmp, _, inputs = simulated_levels
     frame = pd.read_csv(inputs["starts_low"])
     assert set(frame.level) == {"low"} and set(frame["map"]) == {"grid"} and set(frame.localizer) == {"hmm"}
-    assert list(dict.fromkeys(frame.drive)) == ["grid/low/00-circuit", "grid/low/01-stop_reverse"]
+    assert list(dict.fromkeys(frame.drive)) == ["grid/low/00-random", "grid/low/01-circuit", "grid/low/02-stop_reverse"]
     assert (frame.groupby("drive").start_m.min() == 0).all()
     assert frame.groupby("drive").start_m.diff().dropna().between(395.0, 405.0).all()  # a start every 400 m
     metrics = json.loads((tmp / "low" / "metrics.json").read_text())
