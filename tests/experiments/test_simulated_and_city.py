@@ -36,8 +36,8 @@ def test_drive_plan_random_drives_then_a_circuit_and_a_stop_and_reverse():
 @pytest.fixture(scope="module")
 def simulated_levels(tmp_path_factory):
     """Both levels' jobs of the simulated experiment on the grid map: hmm from a start every 400 m, one random drive
-    (the oracle resolves none of the starts of the circuit and the stop-and-reverse drive at level low, so without it the
-    localized share is undefined)."""
+    (the oracle resolves none of the starts of the circuit and the stop-and-reverse drive at level low, so without
+    it the localized share is undefined)."""
     tmp = tmp_path_factory.mktemp("simulated")
     base, experiments = _conf(simulated={"maps": ["grid"], "levels": ["low", "medium"], "drives": 1,
                                          "localizers": ["hmm"], "start_every_m": 400.0})
