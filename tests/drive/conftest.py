@@ -15,6 +15,7 @@ from topoloc.drive.controller_training import DemoData, fit
 from topoloc.drive.demonstrations import Demonstrations, record
 from topoloc.drive.drive_route import DriveRoute, build_route
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
+from topoloc.drive.repeat_routes import vertex_lane_s
 from topoloc.drive.route_planning import plan_route
 from topoloc.drive.simulator import SUCCESS, Simulator, VehicleSpec
 from topoloc.graph.from_osm import build_road_graph
@@ -179,3 +180,14 @@ def lane_map(route, step_m: float = 1.0) -> TopometricMap:
     xy = np.stack([route.point(v) for v in s])
     command = np.array([route.command_at(v) for v in s])
     return TopometricMap(np.zeros((len(s), 4), np.float32), np.zeros((len(s), 4), np.float32), xy, command, xy, "clear_noon")
+
+
+def right_turn(town, town_graph) -> tuple:
+    """The town's 175 m route with its right turn: drive and stage config, route, simulator, lane map, vertex arcs."""
+    drive = drive_conf(follow={"start_lateral_m": 0.0, "start_yaw_deg": 0.0})
+    conf = {"drive": drive, "place": make_config()["place"]}
+    route = town_route(town_graph, "right", drive).cut(175.0)
+    sim = Simulator(route, route_scene(town["osm"], town_graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
+                    VehicleSpec.from_conf(drive), 100.0)
+    topo = lane_map(route)
+    return drive, conf, route, sim, topo, vertex_lane_s(route, topo)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import make_config
-from tests.drive.conftest import drive_conf, lane_map, route_scene, town_route
+from tests.drive.conftest import drive_conf, lane_map, right_turn, route_scene, town_route
 from topoloc.drive.agents import ReplayAgent
 from topoloc.drive.episodes import run_episode, speed_limit_ahead, teach_controls
 from topoloc.drive.expert import Expert, ExpertSettings
@@ -17,17 +17,6 @@ from topoloc.drive.simulator import Control, Simulator, VehicleSpec
 from topoloc.errors import InputError
 from topoloc.place.topometric_map import TopometricMap
 from topoloc.render.rig import StereoRig
-
-
-def right_turn(town, town_graph) -> tuple:
-    """The town's 175 m route with its right turn: drive and stage config, route, simulator, lane map, vertex arcs."""
-    drive = drive_conf(follow={"start_lateral_m": 0.0, "start_yaw_deg": 0.0})
-    conf = {"drive": drive, "place": make_config()["place"]}
-    route = town_route(town_graph, "right", drive).cut(175.0)
-    sim = Simulator(route, route_scene(town["osm"], town_graph, route), StereoRig.kitti(64, 48, 0.54, 1.65),
-                    VehicleSpec.from_conf(drive), 100.0)
-    topo = lane_map(route)
-    return drive, conf, route, sim, topo, vertex_lane_s(route, topo)
 
 
 def test_replay_with_ground_truth_follows_the_teach_drive(town, town_graph):

@@ -8,7 +8,7 @@ import gzip
 import numpy as np
 import pytest
 
-from tests.drive.test_closed_loop import right_turn
+from tests.drive.conftest import right_turn
 from topoloc.drive.agents import ReplayAgent
 from topoloc.drive.episodes import run_episode, teach_controls
 from topoloc.drive.expert import Expert, ExpertSettings
