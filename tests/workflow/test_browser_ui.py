@@ -17,7 +17,7 @@ import sys
 import urllib.request
 
 import pytest
-from conftest import clean_env, free_port, wait_for_http
+from tests.workflow.conftest import clean_env, free_port, wait_for_http
 
 from topoloc.viewer.browser import chromium_missing, console_errors, start_chromium
 
