@@ -14,7 +14,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent / "localization"))
 sys.path.insert(0, str(Path(__file__).resolve().parent / "trajectory"))
 
-from localization_helpers import drive_along, dual_carriageway, irregular_grid
+from localization_helpers import drive_along, dual_carriageway, irregular_grid, route_track
 
 from topoloc.cli import main
 from topoloc.graph.road_graph import RoadGraph
@@ -22,17 +22,6 @@ from topoloc.motion.poses import poses_from_planar, write_poses
 
 REPO = Path(__file__).resolve().parents[1]
 ROUTE = [0, 1, 6, 7, 8, 13, 14, 9, 4]
-
-
-def route_track(graph, nodes, step=1.0):
-    """Points every ``step`` metres along the straight roads between ``nodes``."""
-    pts = []
-    for a, b in zip(nodes[:-1], nodes[1:]):
-        p, q = graph.nodes.loc[a, ["x", "y"]].to_numpy(float), graph.nodes.loc[b, ["x", "y"]].to_numpy(float)
-        n = int(np.hypot(*(q - p)) / step)
-        pts.append(p + (q - p) * np.arange(n)[:, None] / n)
-    pts.append(graph.nodes.loc[[nodes[-1]], ["x", "y"]].to_numpy(float))
-    return np.vstack(pts)
 
 
 @pytest.fixture(scope="module")

@@ -98,3 +98,14 @@ def drive_along(graph, route: list[int], start_m: float = 0.0, every_m: float = 
     keep = driven >= start_m - 1e-9
     step = np.diff(xy, axis=0, append=xy[-1:] + (xy[-1:] - xy[-2:-1]))
     return xy[keep], np.arctan2(step[:, 1], step[:, 0])[keep], labels[keep], driven[keep] - driven[keep][0]
+
+
+def route_track(graph, nodes, step=1.0):
+    """Points every ``step`` metres along the straight roads between ``nodes``."""
+    pts = []
+    for a, b in zip(nodes[:-1], nodes[1:]):
+        p, q = graph.nodes.loc[a, ["x", "y"]].to_numpy(float), graph.nodes.loc[b, ["x", "y"]].to_numpy(float)
+        n = int(np.hypot(*(q - p)) / step)
+        pts.append(p + (q - p) * np.arange(n)[:, None] / n)
+    pts.append(graph.nodes.loc[[nodes[-1]], ["x", "y"]].to_numpy(float))
+    return np.vstack(pts)

@@ -13,7 +13,7 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "localization"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "trajectory"))
 
-from localization_helpers import irregular_grid
+from localization_helpers import irregular_grid, route_track
 
 from topoloc.config import load
 from topoloc.localization.roadmap import RoadMap
@@ -24,17 +24,6 @@ from topoloc.viewer.page import write_viewer
 
 ROUTE = [0, 1, 6, 7, 8, 13, 14, 9, 4]
 OFFSET = np.array([385000.0, 6670000.0])  # the grid placed in Helsinki, EPSG:3067
-
-
-def route_track(graph, nodes, step=1.0):
-    """Points every ``step`` metres along the straight roads between ``nodes``."""
-    pts = []
-    for a, b in zip(nodes[:-1], nodes[1:]):
-        p, q = graph.nodes.loc[a, ["x", "y"]].to_numpy(float), graph.nodes.loc[b, ["x", "y"]].to_numpy(float)
-        n = int(np.hypot(*(q - p)) / step)
-        pts.append(p + (q - p) * np.arange(n)[:, None] / n)
-    pts.append(graph.nodes.loc[[nodes[-1]], ["x", "y"]].to_numpy(float))
-    return np.vstack(pts)
 
 
 def small_drive():
