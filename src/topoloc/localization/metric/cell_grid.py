@@ -18,7 +18,7 @@ vehicle has made at that point (a smooth step through the node).
 
 :meth:`CellGrid.moves` lists, for a drive of ``D`` metres from every cell, the
 cells where the vehicle lands and with which probability: along the chain,
-then onto every chain that may follow (equal shares), hop after hop; a
+then onto every chain that may follow (equal shares, or by the chains' ``weight``), hop after hop; a
 landing point between two cell centres is split between them (linear
 interpolation). Both localizers on cells (the token HMM baseline and the
 metric filter) build their transitions from it.
@@ -50,6 +50,8 @@ class Chains:
     split: NDArray[np.float64]
     second_state: NDArray[np.int64]
     turn: NDArray[np.float64]  #: heading change (radians, counter-clockwise) at the node inside the chain, else 0
+    #: weight of entering this chain where several may follow one (relative to its siblings'); None: all 1
+    weight: NDArray[np.float64] | None = None
 
     @property
     def num_chains(self) -> int:
@@ -196,7 +198,12 @@ class CellGrid:
             rep = np.repeat(np.arange(len(c)), counts)
             offset = np.arange(len(rep)) - np.repeat(np.cumsum(counts) - counts, counts)
             nxt = ch.next_idx[ch.next_ptr[c][rep] + offset]
-            src, q, w, c = src[rep], q[rep], (w[rep] / counts[rep] if split else w[rep]), nxt
+            if ch.weight is None:
+                w = w[rep] / counts[rep] if split else w[rep]
+            else:  # weighted shares, or (not split) every way keeps the whole times its weight
+                share = ch.weight[nxt]
+                w = w[rep] * (share / np.bincount(rep, weights=share, minlength=len(c))[rep] if split else share)
+            src, q, c = src[rep], q[rep], nxt
         if not out:
             empty = np.zeros(0, np.int64)
             return Moves(empty, empty, np.zeros(0))

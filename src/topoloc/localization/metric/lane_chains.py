@@ -34,8 +34,10 @@ def end_headings(graph: RoadGraph, states: DirectedEdges, half: float) -> tuple[
     return start, end
 
 
-def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, heading_window_m: float) -> Chains:
-    """Middles and turn chains of ``graph`` (see the module docstring)."""
+def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, heading_window_m: float,
+                u_turn_weight: float = 1.0) -> Chains:
+    """Middles and turn chains of ``graph`` (see the module docstring); a U-turn chain is entered with
+    ``u_turn_weight`` times the share of any other turn (each of its two sweeps half of that)."""
     valid = np.flatnonzero(states.valid)
     length = states.length
     zone = np.where(states.valid, np.minimum(float(turn_zone_m), length / 2.0), 0.0)
@@ -45,6 +47,9 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     middle_of = np.full(states.num_states, -1)
     middle_of[middles] = np.arange(len(middles))
     pairs = [(int(a), int(b)) for a in valid for b in states.next_states(int(a))]
+    # a U-turn (back onto the same road) may sweep either way: left in right-hand traffic, right in left-hand
+    # traffic or round a turning circle; its heading change of 180 deg alone cannot say which
+    pairs += [(a, b) for a, b in pairs if b == a ^ 1]
     src = np.array([a for a, _ in pairs], np.int64)
     dst = np.array([b for _, b in pairs], np.int64)
     turn_of: dict[int, list[int]] = {}  # directed edge -> its turn chains (by the edge they leave)
@@ -53,6 +58,9 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
         turn_of.setdefault(int(a), []).append(first_turn + k)
     h_start, h_end = end_headings(graph, states, heading_window_m / 2.0)
     turn = np.angle(np.exp(1j * (h_start[dst] - h_end[src])))
+    u_turn = dst == (src ^ 1)
+    sweep = np.where(np.arange(len(src)) < len(src) - u_turn.sum() // 2, 1.0, -1.0)  # the added copies sweep the other way
+    turn = np.where(u_turn, sweep * np.pi, turn)
 
     successors: list[list[int]] = [turn_of.get(int(s), []) for s in middles]
     for b in dst:
@@ -67,4 +75,5 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
         split=np.concatenate([middle_len[middles], zone[src]]),
         second_state=np.concatenate([np.full(len(middles), -1), dst]),
         turn=np.concatenate([np.zeros(len(middles)), turn]),
+        weight=np.concatenate([np.ones(len(middles)), np.where(u_turn, 0.5 * float(u_turn_weight), 1.0)]),
     )

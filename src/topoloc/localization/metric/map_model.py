@@ -23,7 +23,7 @@ from topoloc.localization.metric.lane_chains import lane_chains
 
 TWO_PI = 2.0 * math.pi
 INT_SETTINGS = ("scale_classes", "coarse_factor", "coarse_min_cells", "coarse_handoff_cells")
-STR_SETTINGS = ("branches",)
+STR_SETTINGS = ("branches", "u_turns")
 
 
 @dataclass(frozen=True)
@@ -51,6 +51,8 @@ class MetricSettings:
     coarse_spread: float = 1.0
     branches: str = "equal"
     node_offset_deg: float = 0.0
+    u_turns: str = "always"
+    u_turn_weight: float = 0.02
 
     @classmethod
     def from_conf(cls, conf: dict) -> MetricSettings:
@@ -71,7 +73,7 @@ class MetricModel:
 
     def __init__(self, graph: RoadGraph, states: DirectedEdges, settings: MetricSettings) -> None:
         self.settings = settings
-        chains = lane_chains(graph, states, settings.turn_zone_m, settings.heading_window_m)
+        chains = lane_chains(graph, states, settings.turn_zone_m, settings.heading_window_m, settings.u_turn_weight)
         self.grid = grid = CellGrid(graph, states, chains, settings.cell_m, settings.heading_window_m)
         n = grid.num_cells
         p = settings.step_jitter
