@@ -109,3 +109,16 @@ def test_roads_joining_on_a_straight_are_no_evidence():
     assert (result.places[before][driven[before] > 250.0] == 2).all()  # both straights are long enough
     assert result.status == "ambiguous" or result.turns == 1
     assert result.walks[-1] == 2 and result.localized_frame is None  # the turn is the same on both
+
+
+
+def test_a_turn_no_road_of_the_map_makes_leaves_the_start_open():
+    # the first road of corridor A, then its third (a map that lacks the road between them): a 60 deg turn that no
+    # move of the map makes; no walk agrees, and the oracle says the start is open instead of failing
+    graph = mirror_corridors()
+    first, third = drive_along(graph, [0, 1]), drive_along(graph, [2, 3])
+    xy, edge = np.concatenate([first[0], third[0]]), np.concatenate([first[2], third[2]])
+    driven = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+    result = Oracle(graph, directed_edges(graph), 15.0, 0.05).count(true_path(graph, edge, xy, driven), 0, 0.0)
+    assert result.status == "open" and result.localized_frame is None
+    assert (result.walks[driven > first[3][-1] + 1.0] == 0).all()

@@ -230,6 +230,8 @@ class Oracle:
                     break
                 ok = (np.abs(np.angle(np.exp(1j * (self.angle - ev_angle[0])))) <= self.angle_tol) & (back[self.src] >= (1.0 - tol) * seg_len)
                 cand, mult = self._merge(self.dst[ok], np.ones(ok.sum()))
+                if len(cand) == 0:  # no road of the map turns as the drive does (the map lacks the true turn)
+                    break
                 continue
             hi = (1.0 + tol) * seg_len if np.isfinite(seg_len) else float(d.max(initial=0.0)) + 1.0
             owner, state, begin, end, stuck = self._forward(cand, mult, hi)
