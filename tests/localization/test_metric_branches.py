@@ -87,3 +87,25 @@ def test_node_offset_widens_the_offset_spread_on_turns_only():
     chain = base.grid.chain[on_turn]
     extra = np.bincount(chain, weights=(wide.drift - base.drift)[on_turn].astype(float))[np.unique(chain)]
     assert np.allclose(extra, np.radians(10.0) ** 2, rtol=1e-4)
+
+
+def test_u_turns_at_every_node_take_their_weight_and_a_dead_end_keeps_the_whole():
+    # two-way roads: 0 -> 1 -> 2 (a dead end) with a side road 1 -> 3; U-turns at every node at weight 0.02
+    graph = make_graph({0: (0.0, 0.0), 1: (200.0, 0.0), 2: (400.0, 0.0), 3: (200.0, -150.0)},
+                       [(0, 1, 0), (1, 2, 0), (1, 3, 0)])
+    settings = MetricSettings.from_conf(conf_slices(u_turns="always", u_turn_weight=0.02)["localization"]["metric"])
+    grid = MetricModel(graph, directed_edges(graph, "always"), settings).grid
+    chains = grid.chains
+    u_turn = (chains.second_state >= 0) & (chains.second_state == (chains.first_state ^ 1))
+    assert u_turn.any() and set(np.sign(chains.turn[u_turn])) == {-1.0, 1.0}  # each U-turn sweeps both ways
+    for split in (True, False):
+        moves = grid.moves(3.0 * grid.cell_m, split)
+        out = np.bincount(moves.src, weights=moves.weight, minlength=grid.num_cells)
+        into_u = np.bincount(moves.src, weights=moves.weight * u_turn[grid.chain[moves.dst]], minlength=grid.num_cells)
+        at_junction = (into_u > 0) & (out > into_u + 1e-9)  # cells whose moves reach a U-turn and another way
+        at_dead_end = (into_u > 0) & ~at_junction
+        assert at_junction.any() and at_dead_end.any()
+        if split:  # shares: the U-turn 0.02 of another way's (two ways on at node 1: 0.02 / 2.02 of the whole)
+            assert np.allclose(out, 1.0) and np.allclose(into_u[at_junction] / out[at_junction], 0.02 / 2.02, rtol=0.05)
+        else:  # walks: every way on keeps the whole, the U-turn 0.02 of it; a dead end's U-turn the whole
+            assert np.allclose(into_u[at_junction], 0.02, rtol=0.05) and np.allclose(into_u[at_dead_end], 1.0)

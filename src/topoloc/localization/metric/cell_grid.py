@@ -52,6 +52,8 @@ class Chains:
     turn: NDArray[np.float64]  #: heading change (radians, counter-clockwise) at the node inside the chain, else 0
     #: weight of entering this chain where several may follow one (relative to its siblings'); None: all 1
     weight: NDArray[np.float64] | None = None
+    #: weight of the way the chain takes (several chains may be one way: a U-turn's two sweeps); None: ``weight``
+    way: NDArray[np.float64] | None = None
 
     @property
     def num_chains(self) -> int:
@@ -200,9 +202,14 @@ class CellGrid:
             nxt = ch.next_idx[ch.next_ptr[c][rep] + offset]
             if ch.weight is None:
                 w = w[rep] / counts[rep] if split else w[rep]
-            else:  # weighted shares, or (not split) every way keeps the whole times its weight
+            elif split:  # shares by weight
                 share = ch.weight[nxt]
-                w = w[rep] * (share / np.bincount(rep, weights=share, minlength=len(c))[rep] if split else share)
+                w = w[rep] * share / np.bincount(rep, weights=share, minlength=len(c))[rep]
+            else:  # every way keeps the whole times its weight against the likeliest way on (a dead end's U-turn: 1)
+                way = ch.weight if ch.way is None else ch.way
+                top = np.zeros(len(c))
+                np.maximum.at(top, rep, way[nxt])
+                w = w[rep] * ch.weight[nxt] / top[rep]
             src, q, c = src[rep], q[rep], nxt
         if not out:
             empty = np.zeros(0, np.int64)

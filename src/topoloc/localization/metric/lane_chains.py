@@ -76,4 +76,5 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
         second_state=np.concatenate([np.full(len(middles), -1), dst]),
         turn=np.concatenate([np.zeros(len(middles)), turn]),
         weight=np.concatenate([np.ones(len(middles)), np.where(u_turn, 0.5 * float(u_turn_weight), 1.0)]),
+        way=np.concatenate([np.ones(len(middles)), np.where(u_turn, float(u_turn_weight), 1.0)]),
     )
