@@ -61,6 +61,10 @@ class Observations:
 class RoadLocalizer(Localizer):
     """A localizer on a :class:`RoadMap`; ``conf`` holds the ``localization``, ``segmentation`` and ``encoding`` slices."""
 
+    def set_places(self, conf: dict[str, Any]) -> None:
+        """How many top places an answer lists, and within how many metres two are one (``localization.places``)."""
+        self.top, self.merge_m = int(conf["localization"]["places"]["top"]), float(conf["localization"]["places"]["merge_m"])
+
     @abstractmethod
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
         """What this localizer observes of ``odometry``."""

@@ -26,10 +26,6 @@ class HmmBaseline(RoadLocalizer):
         self.bins = bins
         self.set_places(conf)
 
-    def set_places(self, conf: dict[str, Any]) -> None:
-        """How many top places an answer lists, and within how many metres two are one (``localization.places``)."""
-        self.top, self.merge_m = int(conf["localization"]["places"]["top"]), float(conf["localization"]["places"]["merge_m"])
-
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
         return token_observations(odometry, map, conf, int(conf["encoding"]["angle_bins"]))
 

@@ -40,7 +40,7 @@ class MetricLocalizer(RoadLocalizer):
             coarse = map.cached(("metric", wide), lambda: MetricModel(map.graph, states, wide))
         self.coarse_model = coarse
         self.filter = CityFilter(model, coarse)
-        self.top, self.merge_m = int(conf["localization"]["places"]["top"]), float(conf["localization"]["places"]["merge_m"])
+        self.set_places(conf)
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
         steps = odometry_steps(odometry.xy, odometry.yaw, float(conf["localization"]["metric"]["cell_m"]))
