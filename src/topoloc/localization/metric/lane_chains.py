@@ -49,7 +49,8 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     pairs = [(int(a), int(b)) for a in valid for b in states.next_states(int(a))]
     # a U-turn (back onto the same road) may sweep either way: left in right-hand traffic, right in left-hand
     # traffic or round a turning circle; its heading change of 180 deg alone cannot say which
-    pairs += [(a, b) for a, b in pairs if b == a ^ 1]
+    other_sweep = [(a, b) for a, b in pairs if b == a ^ 1]
+    pairs += other_sweep
     src = np.array([a for a, _ in pairs], np.int64)
     dst = np.array([b for _, b in pairs], np.int64)
     turn_of: dict[int, list[int]] = {}  # directed edge -> its turn chains (by the edge they leave)
@@ -59,8 +60,8 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     h_start, h_end = end_headings(graph, states, heading_window_m / 2.0)
     turn = np.angle(np.exp(1j * (h_start[dst] - h_end[src])))
     u_turn = dst == (src ^ 1)
-    sweep = np.where(np.arange(len(src)) < len(src) - u_turn.sum() // 2, 1.0, -1.0)  # the added copies sweep the other way
-    turn = np.where(u_turn, sweep * np.pi, turn)
+    clockwise = np.arange(len(src)) >= len(src) - len(other_sweep)  # the copies appended above
+    turn = np.where(u_turn, np.where(clockwise, -np.pi, np.pi), turn)
 
     successors: list[list[int]] = [turn_of.get(int(s), []) for s in middles]
     for b in dst:
