@@ -27,7 +27,7 @@ from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path, write_json
 from topoloc.localization.drive_on_map import write_geojson
-from topoloc.localization.evaluation import DriveTruth, start_frames
+from topoloc.localization.evaluation import DriveTruth, read_frames, start_frames
 from topoloc.localization.roadmap import RoadMap
 from topoloc.localizer import ROAD_OBSERVATIONS
 from topoloc.motion.poses import Odometry
@@ -43,20 +43,6 @@ ANSWER_COLUMNS = ["start", "localizer", "step", "frame", "state", "confidence", 
 def place_columns(top: int) -> list[str]:
     """The columns of the top places in ``answers.csv``, after :data:`ANSWER_COLUMNS`."""
     return [f"place{i}_{what}" for i in range(1, top + 1) for what in ("state", "prob", "x", "y")]
-
-
-def read_frames(path: str) -> pd.DataFrame:
-    """A ``frames.csv`` of ``extract_odometry``; InputError if it is not one."""
-    try:
-        frames = pd.read_csv(path)
-    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as err:
-        raise InputError(path, f"cannot read the frames table ({err})") from err
-    missing = {"edge_id", "x", "y"} - set(frames.columns)
-    if missing:
-        raise InputError(path, f"not a frames table of extract_odometry (no {sorted(missing)[0]!r} column)")
-    if len(frames) < 2:
-        raise InputError(path, "empty trajectory: a drive needs at least two frames")
-    return frames
 
 
 def road_conf(conf: dict[str, Any]) -> dict[str, Any]:

@@ -27,8 +27,23 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization import calibration
+
+
+def read_frames(path: str) -> pd.DataFrame:
+    """A ``frames.csv`` of ``extract_odometry``; InputError if it is not one."""
+    try:
+        frames = pd.read_csv(path)
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as err:
+        raise InputError(path, f"cannot read the frames table ({err})") from err
+    missing = {"edge_id", "x", "y"} - set(frames.columns)
+    if missing:
+        raise InputError(path, f"not a frames table of extract_odometry (no {sorted(missing)[0]!r} column)")
+    if len(frames) < 2:
+        raise InputError(path, "empty trajectory: a drive needs at least two frames")
+    return frames
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ import pandas as pd
 
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
+from topoloc.localization.evaluation import read_frames
 from topoloc.motion.poses import Odometry, read_poses
 from topoloc.viewer.drive_view import check_answers, drive_data
 from topoloc.viewer.page import write_viewer
@@ -33,17 +34,6 @@ def localized_of(path: str, drive: str, start: int) -> dict[str, float]:
         raise InputError(path, f"not a starts table of evaluate_localization (no {sorted(missing)[0]!r} column)")
     rows = table[(table.drive.astype(str) == drive) & (table.start == start)]
     return {str(r.localizer): float(r.localized_m) for r in rows.itertuples()}
-
-
-def read_frames(path: str) -> pd.DataFrame:
-    """A ``frames.csv`` of ``extract_odometry`` (its ``gt_x``/``gt_y`` are the truth when given)."""
-    try:
-        frames = pd.read_csv(path)
-    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as err:
-        raise InputError(path, f"cannot read the frames table ({err})") from err
-    if "frame" not in frames.columns or len(frames) < 2:
-        raise InputError(path, "not a frames table of extract_odometry (no 'frame' column, or under two frames)")
-    return frames
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
