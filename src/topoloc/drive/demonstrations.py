@@ -231,7 +231,8 @@ def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] |
             else np.zeros(len(route.xy[::8]), bool)
         if (1.0 - near.mean()) * route.length_m / step_m / every >= int(demo_conf["min_steps"]):
             if wide and route.wide_middle_share < WIDE_MIDDLE_MIN:
-                other.append(route)
+                if len(other) < candidates:  # the fallback keeps the first ones only
+                    other.append(route)
                 continue
             kept.append(route)
             if len(kept) >= candidates:
