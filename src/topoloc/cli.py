@@ -132,7 +132,7 @@ def localize(args: argparse.Namespace) -> dict[str, Any]:
     write_geojson(geojson_path, graph, first, names[0], track_xy)
     if args.html:
         answers = table.rename(columns={"edge": "state"})
-        data = drive_data(f"topoloc localize: {Path(args.poses).name}", graph, odometry, answers, conf, track_xy)
+        data = drive_data(f"topoloc localize: {Path(args.poses).name}", graph, odometry, answers, conf, track_xy, road=road)
         write_viewer(args.html, graph, data, conf["viewer"]["tiles"])
     final = first.iloc[-1]
     sure = first.confidence.to_numpy() >= (args.sure if args.sure is not None else conf["localization"]["evaluate"]["sure"])

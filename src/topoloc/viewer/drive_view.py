@@ -40,14 +40,16 @@ def sure_frame(driven: NDArray[np.float64], start: int, localized_m: float) -> i
 
 def drive_data(title: str, graph: RoadGraph, odometry: Odometry, answers: pd.DataFrame | None, conf: dict[str, Any],
                truth_xy: NDArray[np.float64] | None = None, times: NDArray[np.float64] | None = None,
-               starts: list[int] | None = None, localized_m: dict[str, float] | None = None) -> ViewerData:
+               starts: list[int] | None = None, localized_m: dict[str, float] | None = None,
+               road: RoadMap | None = None) -> ViewerData:
     """The viewer's data of one drive.
 
     ``answers``: one run per localizer from the drive's first frame (columns :data:`ANSWER_COLUMNS`), or None for
     the metric filter's answers of the belief's run (city maps: one localizer, run once). ``truth_xy``:
     the true (or georeferenced) position per frame, in the graph's CRS, or None. ``starts``: the evaluation's start
     frames. ``localized_m``: per localizer (and ``oracle``) the metres from the first start until it was localized,
-    as the evaluation counts it; None: where the answer first reaches ``localization.evaluate.sure``."""
+    as the evaluation counts it; None: where the answer first reaches ``localization.evaluate.sure``. ``road``: the
+    caller's road map of ``graph``, whose cached map structures the belief's run reuses (default: a new one)."""
     view = conf["viewer"]
     latlon = latlon_of(graph.crs)
     count = len(odometry)
@@ -58,7 +60,8 @@ def drive_data(title: str, graph: RoadGraph, odometry: Odometry, answers: pd.Dat
                             "t_s": np.round(np.asarray(times, float)[row_frames], 2).tolist() if times is not None else None})
     if truth_xy is not None:
         data.truth = latlon(truth_xy[row_frames])
-    road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], conf["localization"]["decode"]["max_skip_m"])
+    if road is None:
+        road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], conf["localization"]["decode"]["max_skip_m"])
     loc_conf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
     belief = belief_moments(road, odometry, loc_conf, float(view["belief_every_m"]), int(view["top_roads"]),
                             int(view["heat_points"]), latlon)

@@ -41,14 +41,14 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         sim = simulate_pattern_drive(graph, length, NOISE_LEVELS[level], rng, "random")
         driven = truth_driven(sim.gt_xy)
         starts = start_frames(driven, float(exp["start_every_m"]))
-        road = RoadMap(graph, conf["localization"]["decode"]["u_turns"])
+        road = RoadMap(graph, conf["localization"]["decode"]["u_turns"], conf["localization"]["decode"]["max_skip_m"])
         oracle = Oracle(graph, road.states, ev["oracle"]["angle_tol_deg"], ev["oracle"]["length_tol"])
         path = true_path(graph, sim.edge, sim.gt_xy, driven)
         oracle_m = oracle.count(path, int(starts[0]), float(ev["confirm_m"])).localized_m
         km = graph.edges.length_m.sum() / 1000.0
         data = drive_data(f"topoloc viewer: {map_name} ({km:.0f} km of road), a {sim.length_m / 1000:.1f} km drive, "
                           f"{level} noise", graph, sim.odometry, None, conf, sim.gt_xy, None, starts.tolist(),
-                          None)
+                          None, road=road)
         if np.isfinite(oracle_m):
             frame = int(min(np.searchsorted(driven, driven[starts[0]] + oracle_m), len(driven) - 1))
             row = int(np.searchsorted(data.time["frame"], frame, side="right") - 1)
