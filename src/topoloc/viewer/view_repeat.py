@@ -52,11 +52,15 @@ def _table(path: str, columns: set[str], what: str) -> pd.DataFrame:
     return table
 
 
-def add_episodes(data: ViewerData, path: str, vertices: pd.DataFrame, condition: str, row_m: np.ndarray,
+def read_episodes(path: str) -> pd.DataFrame:
+    """``follow_route``'s ``episodes.csv``."""
+    return _table(path, {"episode", "route", "route_start_m", "route_length_m", "condition", "agent", "outcome",
+                         "success", "progress_m"}, "follow_route episodes table")
+
+
+def add_episodes(data: ViewerData, episodes: pd.DataFrame, vertices: pd.DataFrame, condition: str, row_m: np.ndarray,
                  latlon: Any) -> None:
     """Route following: the routes as lines, a ``fail`` mark where each failed episode of ``condition`` stopped."""
-    episodes = _table(path, {"route", "route_start_m", "route_length_m", "condition", "agent", "outcome", "success",
-                             "progress_m"}, "follow_route episodes table")
     s, xy = vertices.s.to_numpy(float), vertices[["gt_x", "gt_y"]].to_numpy(float)
     for route, group in episodes.groupby("route"):
         start, length = float(group.route_start_m.iat[0]), float(group.route_length_m.iat[0])
@@ -76,16 +80,13 @@ def add_episodes(data: ViewerData, path: str, vertices: pd.DataFrame, condition:
                       "where the others stopped.")
 
 
-def add_drives(data: ViewerData, path: str, episodes_path: str | None, condition: str, row_m: np.ndarray,
+def add_drives(data: ViewerData, path: str, episodes: pd.DataFrame | None, condition: str, row_m: np.ndarray,
                latlon: Any) -> None:
     """Closed-loop drives of ``condition`` from the traces at ``path``, to replay along the slider (``row_m``: the
-    metres driven at each row of the repeat drive); outcome and route start from ``episodes_path``."""
+    metres driven at each row of the repeat drive); outcome and route start from ``episodes`` (:func:`read_episodes`)."""
     traces = read_traces(path)
     traces = traces[traces.condition.astype(str) == condition]
-    episodes = pd.DataFrame()
-    if episodes_path:
-        episodes = _table(episodes_path, {"episode", "route_start_m", "outcome", "progress_m"},
-                          "follow_route episodes table").set_index("episode")
+    episodes = episodes.set_index("episode") if episodes is not None else pd.DataFrame()
     for key, run_ in traces.groupby("episode", sort=False):
         run_ = run_.sort_values("step")
         known = key in episodes.index
@@ -147,10 +148,11 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
             data.text = {"idx": row_of[keep].tolist(),
                          "text": [f"{method}: vertex {v}, command {command.get(v, '?')}, error {e:.1f} m" if v >= 0
                                   else f"{method}: not localized" for v, e in zip(vertex, error)]}
-    if inputs.get("episodes"):
-        add_episodes(data, inputs["episodes"], vertices, condition, driven[rows], latlon)
+    episodes = read_episodes(inputs["episodes"]) if inputs.get("episodes") else None
+    if episodes is not None:
+        add_episodes(data, episodes, vertices, condition, driven[rows], latlon)
     if inputs.get("traces"):
-        add_drives(data, inputs["traces"], inputs.get("episodes"), condition,
+        add_drives(data, inputs["traces"], episodes, condition,
                    np.asarray(data.time["driven_m"], float), latlon)  # the metres the slider shows
     npz = np.load(inputs["repeat"])
     images = npz["images"]
