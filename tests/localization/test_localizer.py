@@ -73,7 +73,7 @@ def test_beam_localizers_online_equal_the_batch_decoder(setting, name):
 def test_hmm_localizer_online_equals_the_batch_decode(setting):
     graph, road, conf, tokens = setting
     localizer = make("hmm")
-    unmerged = {**conf, "localization": {**conf["localization"], "places": {"top": 3, "merge_m": 0.0}}}
+    unmerged = {**conf, "localization": {**conf["localization"], "places": {**conf["localization"]["places"], "top": 3, "merge_m": 0.0}}}
     localizer.reset(road, unmerged)
     track = localizer.run(tokens)
     batch = CellHMM(graph, road.states, 20, HmmParams.from_conf(conf["localization"]["hmm"])).run(np.asarray(tokens))

@@ -73,10 +73,11 @@ class CellHMM:
     """The baseline on one road graph; build once, then :meth:`run` a token sequence, or :meth:`start`,
     :meth:`update` one token at a time and :meth:`path` the Viterbi path (:class:`topoloc.localizer.Filter`)."""
 
-    def __init__(self, graph: RoadGraph, states: DirectedEdges, bins: int, params: HmmParams) -> None:
+    def __init__(self, graph: RoadGraph, states: DirectedEdges, bins: int, params: HmmParams,
+                 lane_offset_m: NDArray[np.float64] | None = None) -> None:
         self.states, self.bins, self.params = states, bins, params
         self.spacing = graph.virtual_node_spacing_m
-        self.grid = CellGrid(graph, states, Chains.of_states(states), params.cell_m, params.heading_window_m)
+        self.grid = CellGrid(graph, states, Chains.of_states(states), params.cell_m, params.heading_window_m, lane_offset_m)
         self.cell_edge, self.cell_heading = self.grid.edge, self.grid.heading
         self._owner, self._cells = np.zeros(self.num_cells, np.int64), np.arange(self.num_cells)  # for top_places
         self._build_moves()

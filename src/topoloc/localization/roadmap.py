@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.connectivity import DirectedEdges, directed_edges
+from topoloc.localization.metric.cell_grid import lane_offsets
 from topoloc.localizer import Localizer, Track
 from topoloc.motion.poses import Odometry
 from topoloc.segmentation import encode_odometry
@@ -45,6 +46,10 @@ class RoadMap:
             self.cache[key] = build()
         return self.cache[key]
 
+    def lane_offsets(self, side: str) -> NDArray[np.float64]:
+        """Per directed edge, where across the road a vehicle keeps (:func:`~topoloc.localization.metric.cell_grid.lane_offsets`)."""
+        return self.cached(("lane", side), lambda: lane_offsets(self.graph, side))
+
 
 @dataclass(frozen=True)
 class Observations:
@@ -62,8 +67,10 @@ class RoadLocalizer(Localizer):
     """A localizer on a :class:`RoadMap`; ``conf`` holds the ``localization``, ``segmentation`` and ``encoding`` slices."""
 
     def set_places(self, conf: dict[str, Any]) -> None:
-        """How many top places an answer lists, and within how many metres two are one (``localization.places``)."""
-        self.top, self.merge_m = int(conf["localization"]["places"]["top"]), float(conf["localization"]["places"]["merge_m"])
+        """How many top places an answer lists, within how many metres two are one, and where across its road a place
+        lies (``localization.places``)."""
+        places = conf["localization"]["places"]
+        self.top, self.merge_m, self.lane = int(places["top"]), float(places["merge_m"]), str(places["lane"])
 
     @abstractmethod
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:

@@ -20,11 +20,12 @@ class HmmBaseline(RoadLocalizer):
     name, label, observes = "hmm", "HMM baseline", "tokens"
 
     def setup(self, map: RoadMap, conf: dict[str, Any]) -> None:
+        self.set_places(conf)
         params = HmmParams.from_conf(conf["localization"]["hmm"])
         bins = int(conf["encoding"]["angle_bins"])
-        self.hmm = map.cached(("hmm", params, bins), lambda: CellHMM(map.graph, map.states, bins, params))
+        lane = map.lane_offsets(self.lane)
+        self.hmm = map.cached(("hmm", params, bins, self.lane), lambda: CellHMM(map.graph, map.states, bins, params, lane))
         self.bins = bins
-        self.set_places(conf)
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
         return token_observations(odometry, map, conf, int(conf["encoding"]["angle_bins"]))

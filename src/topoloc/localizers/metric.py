@@ -31,16 +31,17 @@ class MetricLocalizer(RoadLocalizer):
     name, label, observes = "metric", "metric filter", "odometry"
 
     def setup(self, map: RoadMap, conf: dict[str, Any]) -> None:
+        self.set_places(conf)
         settings = MetricSettings.from_conf(conf["localization"]["metric"])
         states = metric_states(map, settings)
-        model = map.cached(("metric", settings), lambda: MetricModel(map.graph, states, settings))
+        lane = map.lane_offsets(self.lane)
+        model = map.cached(("metric", settings, self.lane), lambda: MetricModel(map.graph, states, settings, lane))
         coarse = None
         if uses_coarse(settings, model.num_cells):  # a city map: coarse cells while the belief is broad
             wide = coarse_settings(settings)
-            coarse = map.cached(("metric", wide), lambda: MetricModel(map.graph, states, wide))
+            coarse = map.cached(("metric", wide, self.lane), lambda: MetricModel(map.graph, states, wide, lane))
         self.coarse_model = coarse
         self.filter = CityFilter(model, coarse)
-        self.set_places(conf)
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
         steps = odometry_steps(odometry.xy, odometry.yaw, float(conf["localization"]["metric"]["cell_m"]))

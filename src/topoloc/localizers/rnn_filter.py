@@ -35,15 +35,17 @@ class RnnFilter(HmmBaseline):
 
     def setup(self, map: RoadMap, conf: dict[str, Any]) -> None:
         check_model(map, self.name)
+        self.set_places(conf)
         settings = conf["localization"]["rnn_filter"]
         self.bins = int(map.model.hparams.bins)
         params = HmmParams.from_conf(conf["localization"]["hmm"])
-        self.hmm = map.cached(("hmm", params, self.bins), lambda: CellHMM(map.graph, map.states, self.bins, params))
+        lane = map.lane_offsets(self.lane)
+        self.hmm = map.cached(("hmm", params, self.bins, self.lane),
+                              lambda: CellHMM(map.graph, map.states, self.bins, params, lane))
         self.rnn = OnlineRNN(map.model, settings["window"], settings["stride"])
         self.weight = float(settings["evidence_weight"])
         self.log_floor = float(np.log(float(settings["floor"])))
         self.feature_dim = int(map.model.hparams.get("feature_dim", 0))
-        self.set_places(conf)
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
         """The drive's tokens, each with its continuous features: ``(token, features)``."""

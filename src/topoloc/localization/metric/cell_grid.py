@@ -10,7 +10,8 @@ two directed edges: it starts ``first_from`` metres into ``first_state`` and,
 
 Every chain is cut into ``ceil(length / cell_m)`` cells of equal length; a cell
 stands for its centre. Per cell the grid knows its chain, its directed edge,
-its offset along both, its road (undirected edge), its map position and the
+its offset along both, its road (undirected edge), its map position (on the
+centreline, or ``lane_offset_m`` to the right of its direction: :func:`lane_offsets`) and the
 road's heading there: the chord over ``heading_window_m`` around it, clipped to
 its directed edge (so a cell next to an intersection has the heading with
 which its road meets it), turned on turn chains by the share of the turn a
@@ -32,10 +33,14 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
+from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.connectivity import DirectedEdges
+from topoloc.render.textures import edge_widths
 
 MAX_HOPS = 64
+#: Where a vehicle keeps across a road (``localization.places.lane``): the sign of its offset to the right.
+LANE_SIDES = {"right": 1.0, "left": -1.0, "centre": 0.0}
 
 
 @dataclass(frozen=True)
@@ -81,6 +86,18 @@ def polyline_headings(coords: NDArray[np.float64], positions: NDArray[np.float64
     return np.degrees(np.arctan2(dy, dx))
 
 
+def lane_offsets(graph: RoadGraph, side: str) -> NDArray[np.float64]:
+    """Per directed edge (state ``2 e`` runs u -> v, ``2 e + 1`` v -> u), metres to the right of the centreline where a
+    vehicle driving it keeps: on a two-way road a quarter of its carriageway (the middle of the lanes one way:
+    :func:`topoloc.render.textures.carriageway_width`), to the right in right-hand traffic (``side`` ``right``), to the
+    left in left-hand traffic (``left``: negative); on a one-way road, and with ``centre``, the centreline (0)."""
+    if side not in LANE_SIDES:
+        raise InputError("localization.places.lane", f"must be one of {list(LANE_SIDES)}, got {side!r}")
+    two_way = graph.edges.oneway.to_numpy() == 0
+    offset = np.where(two_way, LANE_SIDES[side] * edge_widths(graph.edges) / 4.0, 0.0)
+    return np.repeat(offset, 2)
+
+
 def state_coords(graph: RoadGraph, state: int) -> NDArray[np.float64]:
     """Polyline of a directed edge (state ``2 e`` runs u -> v, ``2 e + 1`` v -> u)."""
     coords = np.asarray(graph.geometry[state // 2], float)
@@ -101,12 +118,14 @@ class CellGrid:
 
     Attributes, one entry per cell: ``chain``, ``offset`` (metres from the chain's start to the cell
     centre), ``state`` (directed edge), ``state_offset`` (metres along it), ``edge`` (road id), ``xy``
-    (map position), ``heading`` (degrees counter-clockwise from +x) and ``to_node`` (metres to the
-    nearest end of its directed edge); per chain: ``base`` (its first cell) and ``cell_len``.
+    (map position: ``lane_offset_m[state]`` right of the centreline, if given), ``heading`` (degrees
+    counter-clockwise from +x) and ``to_node`` (metres to the nearest end of its directed edge); per chain:
+    ``base`` (its first cell) and ``cell_len``. Only the answers' positions use ``xy``; the filters move and weigh
+    cells by chain, offset and heading.
     """
 
     def __init__(self, graph: RoadGraph, states: DirectedEdges, chains: Chains, cell_m: float,
-                 heading_window_m: float) -> None:
+                 heading_window_m: float, lane_offset_m: NDArray[np.float64] | None = None) -> None:
         if not cell_m > 0:
             raise ValueError(f"cell_m must be positive, got {cell_m}")
         self.states, self.chains, self.cell_m = states, chains, float(cell_m)
@@ -122,7 +141,7 @@ class CellGrid:
         self.state = np.where(second, chains.second_state[self.chain], chains.first_state[self.chain])
         self.state_offset = np.where(second, since_node, chains.first_from[self.chain] + self.offset)
         self.edge = states.edge[self.state]
-        self.xy, plain = self._geometry(graph, heading_window_m / 2.0)
+        self.xy, plain = self._geometry(graph, heading_window_m / 2.0, lane_offset_m)
         self.heading = plain + np.degrees(self._turned_share(since_node, second) * chains.turn[self.chain])
         self.turn_ramp = self._ramp(since_node)
         self.prior = self._prior(second)
@@ -137,7 +156,8 @@ class CellGrid:
         prior = self.cell_len[self.chain] / np.maximum(coverage, 1)
         return prior / prior.sum()
 
-    def _geometry(self, graph: RoadGraph, half: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def _geometry(self, graph: RoadGraph, half: float,
+                  lane_offset_m: NDArray[np.float64] | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         xy = np.empty((self.num_cells, 2))
         heading = np.empty(self.num_cells)
         order = np.argsort(self.state, kind="stable")
@@ -149,6 +169,9 @@ class CellGrid:
             cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(coords, axis=0).T))])
             xy[cells] = np.column_stack([np.interp(pos, cum, coords[:, 0]), np.interp(pos, cum, coords[:, 1])])
             heading[cells] = polyline_headings(coords, pos, half)
+            if lane_offset_m is not None and lane_offset_m[s] != 0:
+                h = np.radians(heading[cells])
+                xy[cells] += lane_offset_m[s] * np.column_stack([np.sin(h), -np.cos(h)])
         return xy, heading
 
     def _ramp(self, since_node: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -69,12 +69,14 @@ def _transitions(grid: CellGrid, distance_m: float, split: bool = True) -> sp.cs
 
 
 class MetricModel:
-    """What the filter needs of a map, built once: the cells (with turn chains) and the step transitions."""
+    """What the filter needs of a map, built once: the cells (with turn chains) and the step transitions;
+    ``lane_offset_m`` places the cells' positions (:func:`~topoloc.localization.metric.cell_grid.lane_offsets`)."""
 
-    def __init__(self, graph: RoadGraph, states: DirectedEdges, settings: MetricSettings) -> None:
+    def __init__(self, graph: RoadGraph, states: DirectedEdges, settings: MetricSettings,
+                 lane_offset_m: NDArray[np.float64] | None = None) -> None:
         self.settings = settings
         chains = lane_chains(graph, states, settings.turn_zone_m, settings.heading_window_m, settings.u_turn_weight)
-        self.grid = grid = CellGrid(graph, states, chains, settings.cell_m, settings.heading_window_m)
+        self.grid = grid = CellGrid(graph, states, chains, settings.cell_m, settings.heading_window_m, lane_offset_m)
         n = grid.num_cells
         p = settings.step_jitter
         split = settings.branches == "equal"
