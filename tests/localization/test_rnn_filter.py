@@ -79,3 +79,39 @@ def test_a_model_of_another_map_is_refused(setting):
     wrong = TrajectoryRNN(20, graph.num_edges + 3, cell="lstm", hidden_size=8, embedding_dim=4)
     with pytest.raises(InputError, match=r"^model: the model predicts .* edge classes"):
         make("rnn_filter").reset(RoadMap(graph, model=wrong), conf)
+
+
+def test_map_checked_confidence_is_sure_only_where_the_map_alone_agrees(setting):
+    """A model sure of road 7 whatever it sees: with its own confidence the filter ends sure of road 7, off the
+    drive; with ``map_checked`` the same answer is as unsure as the map alone (the HMM) is of road 7, while a drive the
+    map alone is sure of keeps its confidence."""
+    graph, _, conf, odometry = setting
+    sure = TrajectoryRNN(20, graph.num_edges, cell="lstm", hidden_size=16, embedding_dim=8, feature_dim=3).eval()
+    with torch.no_grad():
+        sure.head.weight.zero_()
+        sure.head.bias.zero_()
+        sure.head.bias[7] = 20.0
+    road = RoadMap(graph, model=sure)
+
+    def with_settings(**rnn_filter):
+        return {**conf, "localization": {**conf["localization"],
+                                         "rnn_filter": {**conf["localization"]["rnn_filter"], **rnn_filter}}}
+
+    own, checked, hmm = make("rnn_filter"), make("rnn_filter"), make("hmm")
+    obs = own.observe(odometry, road, conf)
+    own.reset(road, with_settings(evidence_weight=1.0, confidence="filter"))
+    checked.reset(road, with_settings(evidence_weight=1.0, confidence="map_checked"))
+    a, b = own.run(obs.items), checked.run(obs.items)
+    hmm.reset(road, conf)
+    base = hmm.run([t for t, _ in obs.items])
+    assert a.state.tolist() == b.state.tolist() and a.state[-1] == 7 != base.state[-1]
+    assert a.confidence[-1] > 0.9 and b.confidence[-1] < 0.5
+    assert np.all(b.confidence <= a.confidence + 1e-12)
+    hmm_mass_on_7 = [p.probability for p in hmm.hmm.top_places(50) if p.state == 7]
+    assert b.confidence[-1] == pytest.approx(hmm_mass_on_7[0] if hmm_mass_on_7 else 0.0, abs=1e-6)
+    # without the RNN's say the two filters are one: the confidence is the map's own
+    silent = make("rnn_filter")
+    silent.reset(road, with_settings(evidence_weight=0.0, confidence="map_checked"))
+    assert np.allclose(silent.run(obs.items).confidence, base.confidence)
+    with pytest.raises(InputError, match="localization.rnn_filter.confidence"):
+        make("rnn_filter").reset(road, with_settings(confidence="both"))

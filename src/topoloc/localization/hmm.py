@@ -135,6 +135,18 @@ class CellHMM:
         self.initial = np.zeros(0, np.int64)
         self.online: tuple[int, float] = (-1, 0.0)
 
+    def forward(self, alpha: NDArray, token: int, evidence: NDArray[np.float64] | None = None) -> tuple[NDArray, float]:
+        """One forward step of the belief ``alpha`` for ``token`` (with the per-cell log-likelihood ``evidence``, if
+        any), without touching the filter's own state: the new belief and the total mass before normalising."""
+        n = self.num_cells
+        new = np.bincount(self.dst, weights=alpha[self.src] * self.weights[token], minlength=n)
+        if evidence is not None:
+            new = new * np.exp(evidence - evidence.max())
+        total = float(new.sum())
+        out = new / total if total > 0 else np.full(n, 1.0 / n)
+        reset = self.params.reset_prob
+        return ((1 - reset) * out + reset / n if reset > 0 else out), total
+
     def update(self, token: int, initial_k: int = 5, evidence: NDArray[np.float64] | None = None) -> tuple[int, float]:
         """Forward filter and Viterbi step for one token; the online answer (edge, its marginal).
 
@@ -143,14 +155,8 @@ class CellHMM:
         """
         n = self.num_cells
         reset = self.params.reset_prob
-        new = np.bincount(self.dst, weights=self.alpha[self.src] * self.weights[token], minlength=n)
-        if evidence is not None:
-            new = new * np.exp(evidence - evidence.max())
-        total = new.sum()
+        alpha, total = self.forward(self.alpha, token, evidence)
         self.log_evidence += math.log(max(total, 1e-300))
-        alpha = new / total if total > 0 else np.full(n, 1.0 / n)
-        if reset > 0:
-            alpha = (1 - reset) * alpha + reset / n
         self.alpha = alpha
         marginal = self._edge_marginal(alpha)
         online = int(np.argmax(marginal))
@@ -182,10 +188,10 @@ class CellHMM:
         """The online answer after the last token (edge, its marginal); (-1, 0) before the first."""
         return self.online
 
-    def top_places(self, k: int, merge_m: float = 0.0) -> list[Place]:
-        """The ``k`` most probable places of the forward belief (:class:`topoloc.localizer.RankedFilter`)."""
-        return belief_places(self._owner, self._cells, self.alpha, self.cell_edge, self.grid.xy, 1,
-                             self.states.num_edges, k, merge_m)[0]
+    def top_places(self, k: int, merge_m: float = 0.0, alpha: NDArray | None = None) -> list[Place]:
+        """The ``k`` most probable places of the forward belief, or of belief ``alpha`` (:class:`topoloc.localizer.RankedFilter`)."""
+        return belief_places(self._owner, self._cells, self.alpha if alpha is None else alpha, self.cell_edge,
+                             self.grid.xy, 1, self.states.num_edges, k, merge_m)[0]
 
     def path(self) -> tuple[NDArray[np.int64], int]:
         """The Viterbi cells of the steps so far, and the number of fresh starts on it."""

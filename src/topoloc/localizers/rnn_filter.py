@@ -10,6 +10,11 @@ answer is a posterior given all tokens so far, so it is tempered (``w`` < 1) rat
 full weight every step. The RNN runs in windows of ``window`` tokens every ``stride``
 (:class:`topoloc.localization.rnn.OnlineRNN`; ``window: null`` one pass), with the continuous per-token
 features when the model was trained with them.
+
+The RNN learnt the map's own walks; where the drive leaves them (a U-turn, a road the map has wrong) its evidence can
+make the filter sure of a wrong road. With ``confidence: map_checked`` the filter runs beside it the same HMM
+without the RNN's evidence (the map alone), and each place's probability is the smaller of the two filters'
+(the ranking, hence the answer, stays the RNN filter's): it is sure only where the map alone agrees.
 """
 
 from __future__ import annotations
@@ -22,9 +27,12 @@ from topoloc.errors import InputError
 from topoloc.localization.hmm import CellHMM, HmmParams
 from topoloc.localization.rnn import OnlineRNN, check_model
 from topoloc.localization.roadmap import Observations, RoadMap, token_observations
-from topoloc.localizer import Answer, register
+from topoloc.localizer import Answer, Place, register
 from topoloc.localizers.hmm import HmmBaseline
 from topoloc.motion.poses import Odometry
+
+#: How sure the filter says it is (``localization.rnn_filter.confidence``; module docstring).
+CONFIDENCE = ("filter", "map_checked")
 
 
 @register
@@ -46,6 +54,9 @@ class RnnFilter(HmmBaseline):
         self.weight = float(settings["evidence_weight"])
         self.log_floor = float(np.log(float(settings["floor"])))
         self.feature_dim = int(map.model.hparams.get("feature_dim", 0))
+        if settings["confidence"] not in CONFIDENCE:
+            raise InputError("localization.rnn_filter.confidence", f"must be one of {list(CONFIDENCE)}, got {settings['confidence']!r}")
+        self.map_checked = settings["confidence"] == "map_checked"
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
         """The drive's tokens, each with its continuous features: ``(token, features)``."""
@@ -55,6 +66,7 @@ class RnnFilter(HmmBaseline):
     def start(self) -> None:
         super().start()
         self.rnn.start()
+        self.map_alpha = self.hmm.alpha.copy()  # the map alone: the same HMM without the RNN's evidence
 
     def update(self, observation: Any) -> Answer:
         token, inputs = observation if isinstance(observation, tuple) else (observation, None)
@@ -62,4 +74,12 @@ class RnnFilter(HmmBaseline):
             raise InputError("tokens", f"tokens must lie in [0, {self.bins}) for this model, got {token}")
         logp = self.rnn.update(int(token), inputs if self.feature_dim else None)
         evidence = self.weight * np.maximum(logp.astype(float), self.log_floor)[self.hmm.cell_edge]
-        return self._step(int(token), evidence)
+        answer = self._step(int(token), evidence)
+        if not self.map_checked:
+            return answer
+        self.map_alpha, _ = self.hmm.forward(self.map_alpha, int(token))
+        alone = {p.state: p.probability for p in self.hmm.top_places(2 * self.top, self.merge_m, self.map_alpha)}
+        road = np.bincount(self.hmm.cell_edge, weights=self.map_alpha, minlength=self.hmm.states.num_edges)
+        self._answer = Answer.of_places([Place(p.state, min(p.probability, alone.get(p.state, float(road[p.state]))), p.xy)
+                                         for p in answer.places])
+        return self._answer
