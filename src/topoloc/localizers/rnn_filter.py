@@ -13,8 +13,8 @@ features when the model was trained with them.
 
 The RNN learnt the map's own walks; where the drive leaves them (a U-turn, a road the map has wrong) its evidence can
 make the filter sure of a wrong road. With ``confidence: map_checked`` the filter runs beside it the same HMM
-without the RNN's evidence (the map alone), and each place's probability is the smaller of the two filters'
-(the ranking, hence the answer, stays the RNN filter's): it is sure only where the map alone agrees.
+without the RNN's evidence (the map alone), and each place's probability is the geometric mean of the two filters'
+(the ranking, hence the answer, stays the RNN filter's): it is sure only where the map alone is nearly sure too.
 """
 
 from __future__ import annotations
@@ -78,8 +78,8 @@ class RnnFilter(HmmBaseline):
         if not self.map_checked:
             return answer
         self.map_alpha, _ = self.hmm.forward(self.map_alpha, int(token))
-        alone = {p.state: p.probability for p in self.hmm.top_places(2 * self.top, self.merge_m, self.map_alpha)}
+        alone = {p.state: p.probability for p in self.hmm.top_places(self.top, self.merge_m, self.map_alpha)}
         road = np.bincount(self.hmm.cell_edge, weights=self.map_alpha, minlength=self.hmm.states.num_edges)
-        self._answer = Answer.of_places([Place(p.state, min(p.probability, alone.get(p.state, float(road[p.state]))), p.xy)
+        self._answer = Answer.of_places([Place(p.state, float(np.sqrt(p.probability * alone.get(p.state, float(road[p.state])))), p.xy)
                                          for p in answer.places])
         return self._answer
