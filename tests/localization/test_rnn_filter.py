@@ -108,7 +108,8 @@ def test_map_checked_confidence_is_sure_only_where_the_map_alone_agrees(setting)
     assert a.confidence[-1] > 0.9 and b.confidence[-1] < 0.5
     assert np.all(b.confidence <= a.confidence + 1e-12)
     hmm_mass_on_7 = [p.probability for p in hmm.hmm.top_places(50) if p.state == 7]
-    assert b.confidence[-1] == pytest.approx(np.sqrt(a.confidence[-1] * (hmm_mass_on_7[0] if hmm_mass_on_7 else 0.0)), abs=1e-6)
+    mass = hmm_mass_on_7[0] if hmm_mass_on_7 else 0.0
+    assert b.confidence[-1] == pytest.approx(np.sqrt(a.confidence[-1] * mass), abs=1e-6)
     # without the RNN's say the two filters are one: the confidence is the map's own
     silent = make("rnn_filter")
     silent.reset(road, with_settings(evidence_weight=0.0, confidence="map_checked"))

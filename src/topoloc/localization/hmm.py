@@ -77,7 +77,8 @@ class CellHMM:
                  lane_offset_m: NDArray[np.float64] | None = None) -> None:
         self.states, self.bins, self.params = states, bins, params
         self.spacing = graph.virtual_node_spacing_m
-        self.grid = CellGrid(graph, states, Chains.of_states(states), params.cell_m, params.heading_window_m, lane_offset_m)
+        self.grid = CellGrid(graph, states, Chains.of_states(states), params.cell_m, params.heading_window_m,
+                             lane_offset_m)
         self.cell_edge, self.cell_heading = self.grid.edge, self.grid.heading
         self._owner, self._cells = np.zeros(self.num_cells, np.int64), np.arange(self.num_cells)  # for top_places
         self._build_moves()
@@ -189,7 +190,8 @@ class CellHMM:
         return self.online
 
     def top_places(self, k: int, merge_m: float = 0.0, alpha: NDArray | None = None) -> list[Place]:
-        """The ``k`` most probable places of the forward belief, or of belief ``alpha`` (:class:`topoloc.localizer.RankedFilter`)."""
+        """The ``k`` most probable places of the forward belief, or of belief ``alpha``
+        (:class:`topoloc.localizer.RankedFilter`)."""
         return belief_places(self._owner, self._cells, self.alpha if alpha is None else alpha, self.cell_edge,
                              self.grid.xy, 1, self.states.num_edges, k, merge_m)[0]
 

@@ -47,7 +47,8 @@ class RoadMap:
         return self.cache[key]
 
     def lane_offsets(self, side: str) -> NDArray[np.float64]:
-        """Per directed edge, where across the road a vehicle keeps (:func:`~topoloc.localization.metric.cell_grid.lane_offsets`)."""
+        """Per directed edge, where across the road a vehicle keeps
+        (:func:`~topoloc.localization.metric.cell_grid.lane_offsets`)."""
         return self.cached(("lane", side), lambda: lane_offsets(self.graph, side))
 
 

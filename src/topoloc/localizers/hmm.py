@@ -24,7 +24,8 @@ class HmmBaseline(RoadLocalizer):
         params = HmmParams.from_conf(conf["localization"]["hmm"])
         bins = int(conf["encoding"]["angle_bins"])
         lane = map.lane_offsets(self.lane)
-        self.hmm = map.cached(("hmm", params, bins, self.lane), lambda: CellHMM(map.graph, map.states, bins, params, lane))
+        self.hmm = map.cached(("hmm", params, bins, self.lane),
+                              lambda: CellHMM(map.graph, map.states, bins, params, lane))
         self.bins = bins
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:

@@ -55,7 +55,8 @@ class RnnFilter(HmmBaseline):
         self.log_floor = float(np.log(float(settings["floor"])))
         self.feature_dim = int(map.model.hparams.get("feature_dim", 0))
         if settings["confidence"] not in CONFIDENCE:
-            raise InputError("localization.rnn_filter.confidence", f"must be one of {list(CONFIDENCE)}, got {settings['confidence']!r}")
+            raise InputError("localization.rnn_filter.confidence",
+                             f"must be one of {list(CONFIDENCE)}, got {settings['confidence']!r}")
         self.map_checked = settings["confidence"] == "map_checked"
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
@@ -78,8 +79,12 @@ class RnnFilter(HmmBaseline):
         if not self.map_checked:
             return answer
         self.map_alpha, _ = self.hmm.forward(self.map_alpha, int(token))
+        self._answer = Answer.of_places(self._map_checked(answer.places))
+        return self._answer
+
+    def _map_checked(self, places: tuple[Place, ...]) -> list[Place]:
+        """``places`` with each probability the geometric mean of the filter's and the map alone's: its mass on the
+        same place (merged alike), or on the place's road where the map alone does not rank it."""
         alone = {p.state: p.probability for p in self.hmm.top_places(self.top, self.merge_m, self.map_alpha)}
         road = np.bincount(self.hmm.cell_edge, weights=self.map_alpha, minlength=self.hmm.states.num_edges)
-        self._answer = Answer.of_places([Place(p.state, float(np.sqrt(p.probability * alone.get(p.state, float(road[p.state])))), p.xy)
-                                         for p in answer.places])
-        return self._answer
+        return [Place(p.state, float(np.sqrt(p.probability * alone.get(p.state, road[p.state]))), p.xy) for p in places]
