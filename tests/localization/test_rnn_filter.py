@@ -83,8 +83,8 @@ def test_a_model_of_another_map_is_refused(setting):
 
 def test_map_checked_confidence_is_sure_only_where_the_map_alone_agrees(setting):
     """A model sure of road 7 whatever it sees: with its own confidence the filter ends sure of road 7, off the
-    drive; with ``map_checked`` the same answer is only as sure as the geometric mean of that and the map alone's (the
-    HMM's) mass on road 7; without the RNN's say the confidence is the map's own."""
+    drive; with ``map_checked`` the same answer is only as sure as the mean of that and the map alone's (the HMM's)
+    mass on road 7; without the RNN's say the confidence is the map's own."""
     graph, _, conf, odometry = setting
     sure = TrajectoryRNN(20, graph.num_edges, cell="lstm", hidden_size=16, embedding_dim=8, feature_dim=3).eval()
     with torch.no_grad():
@@ -105,11 +105,11 @@ def test_map_checked_confidence_is_sure_only_where_the_map_alone_agrees(setting)
     hmm.reset(road, conf)
     base = hmm.run([t for t, _ in obs.items])
     assert a.state.tolist() == b.state.tolist() and a.state[-1] == 7 != base.state[-1]
-    assert a.confidence[-1] > 0.9 and b.confidence[-1] < 0.5
+    assert a.confidence[-1] > 0.9 and b.confidence[-1] < 0.6
     assert np.all(b.confidence <= a.confidence + 1e-12)
     hmm_mass_on_7 = [p.probability for p in hmm.hmm.top_places(50) if p.state == 7]
     mass = hmm_mass_on_7[0] if hmm_mass_on_7 else 0.0
-    assert b.confidence[-1] == pytest.approx(np.sqrt(a.confidence[-1] * mass), abs=1e-6)
+    assert b.confidence[-1] == pytest.approx(0.5 * (a.confidence[-1] + mass), abs=1e-4)  # mass: merged places
     # without the RNN's say the two filters are one: the confidence is the map's own
     silent = make("rnn_filter")
     silent.reset(road, with_settings(evidence_weight=0.0, confidence="map_checked"))

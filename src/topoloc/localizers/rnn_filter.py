@@ -13,8 +13,8 @@ features when the model was trained with them.
 
 The RNN learnt the map's own walks; where the drive leaves them (a U-turn, a road the map has wrong) its evidence can
 make the filter sure of a wrong road. With ``confidence: map_checked`` the filter runs beside it the same HMM
-without the RNN's evidence (the map alone), and each place's probability is the geometric mean of the two filters'
-(the ranking, hence the answer, stays the RNN filter's): it is sure only where the map alone is nearly sure too.
+without the RNN's evidence (the map alone), and each place's probability is the mean of the two filters' (the
+ranking, hence the answer, stays the RNN filter's): it is sure only where the map alone is nearly sure too.
 """
 
 from __future__ import annotations
@@ -83,8 +83,8 @@ class RnnFilter(HmmBaseline):
         return self._answer
 
     def _map_checked(self, places: tuple[Place, ...]) -> list[Place]:
-        """``places`` with each probability the geometric mean of the filter's and the map alone's: its mass on the
+        """``places`` with each probability the mean of the filter's and the map alone's: its mass on the
         same place (merged alike), or on the place's road where the map alone does not rank it."""
         alone = {p.state: p.probability for p in self.hmm.top_places(self.top, self.merge_m, self.map_alpha)}
         road = np.bincount(self.hmm.cell_edge, weights=self.map_alpha, minlength=self.hmm.states.num_edges)
-        return [Place(p.state, float(np.sqrt(p.probability * alone.get(p.state, road[p.state]))), p.xy) for p in places]
+        return [Place(p.state, 0.5 * float(p.probability + alone.get(p.state, road[p.state])), p.xy) for p in places]
