@@ -93,6 +93,8 @@ def lane_offsets(graph: RoadGraph, side: str) -> NDArray[np.float64]:
     left in left-hand traffic (``left``: negative); on a one-way road, and with ``centre``, the centreline (0)."""
     if side not in LANE_SIDES:
         raise InputError("localization.places.lane", f"must be one of {list(LANE_SIDES)}, got {side!r}")
+    if LANE_SIDES[side] == 0:  # the default: no widths to work out (a Python loop over a city's roads)
+        return np.zeros(2 * graph.num_edges)
     two_way = graph.edges.oneway.to_numpy() == 0
     offset = np.where(two_way, LANE_SIDES[side] * edge_widths(graph.edges) / 4.0, 0.0)
     return np.repeat(offset, 2)
