@@ -228,6 +228,21 @@ def drive_conf(drive_keys, place_keys):
     return drive_slice(config, drive_keys, place_keys)
 
 
+DEMONSTRATIONS_FROM = config["drive"]["demonstrations_from"]
+if DEMONSTRATIONS_FROM and config["drive"]["dagger"]["rounds"] and REGION not in DEMONSTRATIONS_FROM:
+    _fail(f"drive.demonstrations_from: DAgger (drive.dagger.rounds) drives {REGION}'s routes, so {REGION} must be "
+          "one of the regions (or set drive.dagger.rounds to 0)")
+
+
+def demonstration_inputs(wildcards):
+    """train_controller's demonstrations: this region's, or one input demonstrations_<region> per region of
+    drive.demonstrations_from (pooled by the stage)."""
+    own = "results/{region}/drive/demonstrations.npz"
+    if not DEMONSTRATIONS_FROM:
+        return {"demonstrations": own.format(region=wildcards.region)}
+    return {f"demonstrations_{re.sub(r'[^0-9A-Za-z_]', '_', r)}": own.format(region=r) for r in DEMONSTRATIONS_FROM}
+
+
 def controller_conf(controller):
     """The config slice of train_controller (:func:`topoloc.drive.config_slices.controller_slice`)."""
     return controller_slice(config, controller)

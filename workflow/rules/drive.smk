@@ -32,7 +32,7 @@ rule train_controller:
     """Train Topo-DLM or Topo-LP (Lightning; then DAgger rounds in the simulator and the closed-loop check on unseen
     routes); the model is logged to MLflow with its signature."""
     input:
-        demonstrations=rules.simulate_demonstrations.output.demonstrations,
+        unpack(demonstration_inputs),
         osm=rules.download_osm.output.osm,
         graph=rules.build_graph.output.graph,
     output:

@@ -221,7 +221,7 @@ SEED_DIR = f"{EXPERIMENT}/drive_seeds/{{seed}}"
 rule train_controller_seed:
     """train_controller with drive.train.seed set to {seed} (the closed-loop check included)."""
     input:
-        demonstrations=rules.simulate_demonstrations.output.demonstrations,
+        unpack(demonstration_inputs),
         osm=rules.download_osm.output.osm,
         graph=rules.build_graph.output.graph,
     output:

@@ -16,7 +16,7 @@ again. The last ``val_routes`` routes are for validation. A route's drives depen
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -106,6 +106,20 @@ class Demonstrations:
         """Steps of several recordings with the same conditions, one after the other."""
         return cls(np.concatenate([p.images for p in parts]), list(parts[0].conditions),
                    **{k: np.concatenate([getattr(p, k) for p in parts]) for k in cls.FIELDS})
+
+    @classmethod
+    def pool(cls, maps: list[Demonstrations]) -> Demonstrations:
+        """The demonstrations of several maps as one set: route ``k`` of map ``i`` becomes route ``k * len(maps) + i``,
+        so the last routes (the validation routes, :class:`~topoloc.drive.controller_training.DemoData`) come from
+        every map in turn. ValueError when the maps' images or conditions differ."""
+        first = maps[0]
+        for other in maps[1:]:
+            if other.images.shape[1:] != first.images.shape[1:]:
+                raise ValueError(f"images of {other.images.shape[1:]} against {first.images.shape[1:]}")
+            if other.conditions != first.conditions:
+                raise ValueError(f"conditions {other.conditions} against {first.conditions}")
+        renumbered = [replace(demos, route=demos.route * len(maps) + i) for i, demos in enumerate(maps)]
+        return cls.concat(renumbered)
 
 
 @dataclass(frozen=True)

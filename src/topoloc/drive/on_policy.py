@@ -160,29 +160,39 @@ def collect(controller: Any, agent: str, conf: dict[str, Any], round_index: int,
 CHECK_STREAM = 67
 
 
-def closed_loop_check(controller: Any, agent: str, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None,
-                      make_route: Any, make_simulator: Any) -> dict[str, float]:
-    """The controller's success on ``drive.check.routes`` routes it never trained on (see the module docstring):
-    ``success_rate``, ``share_driven`` (mean share of each route driven), ``success_<condition>`` and the count of
-    each failure outcome, as metrics named ``check/...``."""
+def check_route(r: int, controller: Any, agent: str, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None,
+                make_route: Any, make_simulator: Any) -> tuple[str, str, float]:
+    """Check route ``r`` of :func:`closed_loop_check`, driven by the controller alone: its condition, the drive's
+    outcome and the share of the route driven. Depends on ``r`` and the config alone, so routes can be checked in
+    any order or in parallel."""
     drive = conf["drive"]
-    routes = int(drive["check"]["routes"])
     conditions = [str(c) for c in conf["place"]["repeat_conditions"]]
-    expert_settings = ExpertSettings.from_conf(drive["expert"])
+    route = training_route(r, conf, avoid_xy, make_route, stream=CHECK_STREAM)
+    sim = make_simulator(route)
+    condition = conditions[r % len(conditions)]
+    seed = int(np.random.SeedSequence([int(drive["seed"]), CHECK_STREAM, r]).generate_state(1)[0])
     alone = DaggerSettings(rounds=0, epochs=1, takeover_m=float("inf"), takeover_s=0.0)
-    rows = []
-    for r in tqdm(range(routes), desc="closed-loop check", unit="route"):
-        route = training_route(r, conf, avoid_xy, make_route, stream=CHECK_STREAM)
-        sim = make_simulator(route)
-        condition = conditions[r % len(conditions)]
-        seed = int(np.random.SeedSequence([int(drive["seed"]), CHECK_STREAM, r]).generate_state(1)[0])
-        _, status, _ = drive_on_policy(sim, Expert(route, sim.spec, expert_settings), controller, agent, condition, seed,
-                                       conf, conditions, r, alone, record=False)
-        rows.append((condition, status, min(1.0, sim.s / max(route.length_m - sim.spec.goal_m, 1e-9))))
-    out = {"check/routes": float(routes), "check/success_rate": float(np.mean([s == SUCCESS for _, s, _ in rows])),
+    _, status, _ = drive_on_policy(sim, Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"])), controller,
+                                   agent, condition, seed, conf, conditions, r, alone, record=False)
+    return condition, status, min(1.0, sim.s / max(route.length_m - sim.spec.goal_m, 1e-9))
+
+
+def check_metrics(rows: list[tuple[str, str, float]]) -> dict[str, float]:
+    """The metrics ``check/...`` of the rows of :func:`check_route`: ``routes``, ``success_rate``, ``share_driven``
+    (mean share of each route driven), ``success_<condition>`` and the count of each failure outcome."""
+    out = {"check/routes": float(len(rows)), "check/success_rate": float(np.mean([s == SUCCESS for _, s, _ in rows])),
            "check/share_driven": float(np.mean([share for _, _, share in rows]))}
     for c in dict.fromkeys(c for c, _, _ in rows):
         out[f"check/success_{c}"] = float(np.mean([s == SUCCESS for cc, s, _ in rows if cc == c]))
     for outcome in sorted({s for _, s, _ in rows} - {SUCCESS}):
         out[f"check/{outcome}"] = float(sum(s == outcome for _, s, _ in rows))
     return out
+
+
+def closed_loop_check(controller: Any, agent: str, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None,
+                      make_route: Any, make_simulator: Any) -> dict[str, float]:
+    """The controller's success on ``drive.check.routes`` routes it never trained on (see the module docstring;
+    :func:`check_route`, :func:`check_metrics`)."""
+    routes = int(conf["drive"]["check"]["routes"])
+    return check_metrics([check_route(r, controller, agent, conf, avoid_xy, make_route, make_simulator)
+                          for r in tqdm(range(routes), desc="closed-loop check", unit="route")])
