@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import shutil
+import sys
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -186,7 +187,10 @@ def best_metrics(history: pd.DataFrame) -> dict[str, float]:
 
 
 def mlflow_logger() -> Any:
-    """Lightning's MLFlowLogger bound to the active MLflow run, or None outside one."""
+    """Lightning's MLFlowLogger bound to the active MLflow run, or None outside one (without importing MLflow when
+    nothing has: then no run can be active, and a training outside the pipeline needs no MLflow)."""
+    if "mlflow" not in sys.modules:
+        return None
     import mlflow
     from lightning.pytorch.loggers import MLFlowLogger
 
