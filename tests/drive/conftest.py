@@ -199,7 +199,8 @@ def tiny_demos(routes: list[int], steps: int = 3, shape: tuple[int, int, int] = 
     n = len(routes) * steps
     index = np.arange(n)
     images = np.stack([np.full(shape, (int(tag) * 37 + i) % 256, np.uint8) for i in index])
-    return Demonstrations(images, list(conditions), np.repeat(np.asarray(routes, np.int64), steps), index % len(conditions),
-                          (tag + index).astype(np.float32), np.zeros(n, np.int64), np.zeros(n, np.float32),
-                          np.zeros(n, np.float32), np.zeros(n, np.float32), np.zeros(n, bool), np.zeros((n, 2)), np.zeros(n),
-                          np.zeros(n, np.float32), np.zeros((n, LOCAL_PATH_M, 2), np.float32))
+    steer, throttle, target_speed, lateral = np.zeros((4, n), np.float32)
+    return Demonstrations(images, list(conditions), np.repeat(np.asarray(routes, np.int64), steps),
+                          index % len(conditions), (tag + index).astype(np.float32), np.zeros(n, np.int64), steer,
+                          throttle, target_speed, np.zeros(n, bool), np.zeros((n, 2)), np.zeros(n), lateral,
+                          np.zeros((n, LOCAL_PATH_M, 2), np.float32))

@@ -215,7 +215,8 @@ def test_routes_checked_one_by_one_in_any_order_give_the_closed_loop_check(strai
     """check_route depends on the route index and the config alone: the routes checked last to first give
     closed_loop_check's metrics (so they can be checked in parallel)."""
     drive, sim = straight
-    conf = {"drive": deep_merge(drive, {"check": {"routes": 3}, "follow": {"start_lateral_m": 0.8, "start_yaw_deg": 4.0}}),
+    follow = {"start_lateral_m": 0.8, "start_yaw_deg": 4.0}
+    conf = {"drive": deep_merge(drive, {"check": {"routes": 3}, "follow": follow}),
             "place": {"image": {"color": True}, "repeat_conditions": ["overcast", "rain"]}}
     makers = (lambda rng: sim.route, lambda route: sim)
     controller = ConstantSteer(0.0, drive)  # straight on: off the road from some starts, not from others
