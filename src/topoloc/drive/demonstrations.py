@@ -110,7 +110,7 @@ class Demonstrations:
     @classmethod
     def pool(cls, maps: list[Demonstrations]) -> Demonstrations:
         """The demonstrations of several maps as one set: route ``k`` of map ``i`` becomes route ``k * len(maps) + i``
-        (``k`` counted on so that every map's last route is the last of all, where the maps' route counts differ),
+        (a map of fewer routes has its ``k`` shifted up to end with the others: its last route is the last of all too),
         so the last routes (the validation routes, :class:`~topoloc.drive.controller_training.DemoData`) come from
         every map in turn. ValueError when the maps' images or conditions differ."""
         first = maps[0]
