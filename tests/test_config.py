@@ -57,6 +57,9 @@ def test_load_fills_every_default_from_the_packaged_schema():
     assert config["odometry"]["stereo"]["max_features"] == 800 and config["region"] == {
         "name": "default", "osm_file": None, "place": None, "bbox": None}
     assert load(REPO / "config" / "config.yaml")["region"]["name"] == "helsinki"
+    assert config["drive"]["demonstrations_from"] is None  # this region's own demonstrations
+    assert load(None, {"drive": {"demonstrations_from": ["helsinki", "k00"]}})["drive"]["demonstrations_from"] == [
+        "helsinki", "k00"]
 
 
 @pytest.mark.parametrize(
@@ -65,6 +68,12 @@ def test_load_fills_every_default_from_the_packaged_schema():
         ({"train": {"lr_shedule": "onecycle"}}, "config: unknown key under 'train': Additional properties are not allowed"),
         ({"train": {"batch_size": "64"}}, "config key 'train.batch_size': '64' is not of type 'integer'"),
         ({"localization": {"hmm": {"floor": 2}}}, "config key 'localization.hmm.floor': 2 is greater than the maximum of 1"),
+        ({"drive": {"demonstrations_from": []}}, "config key 'drive.demonstrations_from': [] should be non-empty"),
+        ({"drive": {"demonstrations_from": "k00"}},
+         "config key 'drive.demonstrations_from': 'k00' is not of type 'array'"),
+        ({"drive": {"demonstrations_from": ["k00", "k00"]}},
+         "config key 'drive.demonstrations_from': ['k00', 'k00'] has non-unique"),
+        ({"drive": {"demonstrations_from": [""]}}, "config key 'drive.demonstrations_from.0': '' should be non-empty"),
     ],
 )
 def test_load_rejects_a_bad_key_with_one_line_naming_it(overrides, expected):

@@ -12,7 +12,7 @@ from tests.conftest import make_config, write_osm
 from tests.render.conftest import lonlat, town  # noqa: F401 (the town fixture, re-exported)
 from topoloc.drive.controller import WAYPOINT_SCALE_M, TopoDLM, waypoint_targets
 from topoloc.drive.controller_training import DemoData, fit
-from topoloc.drive.demonstrations import Demonstrations, record
+from topoloc.drive.demonstrations import LOCAL_PATH_M, Demonstrations, record
 from topoloc.drive.drive_route import DriveRoute, build_route
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
 from topoloc.drive.repeat_routes import vertex_lane_s
@@ -191,3 +191,16 @@ def right_turn(town, town_graph) -> tuple:
                     VehicleSpec.from_conf(drive), 100.0)
     topo = lane_map(route)
     return drive, conf, route, sim, topo, vertex_lane_s(route, topo)
+
+
+def tiny_demos(routes: list[int], steps: int = 3, shape: tuple[int, int, int] = (4, 6, 3),
+               conditions: tuple[str, ...] = ("clear_noon", "rain"), tag: float = 0.0) -> Demonstrations:
+    """``steps`` steps on each of ``routes``, every step told apart by its ``speed`` (``tag`` + its index) and image."""
+    n = len(routes) * steps
+    index = np.arange(n)
+    images = np.stack([np.full(shape, (int(tag) * 37 + i) % 256, np.uint8) for i in index])
+    steer, throttle, target_speed, lateral = np.zeros((4, n), np.float32)
+    return Demonstrations(images, list(conditions), np.repeat(np.asarray(routes, np.int64), steps),
+                          index % len(conditions), (tag + index).astype(np.float32), np.zeros(n, np.int64), steer,
+                          throttle, target_speed, np.zeros(n, bool), np.zeros((n, 2)), np.zeros(n), lateral,
+                          np.zeros((n, LOCAL_PATH_M, 2), np.float32))

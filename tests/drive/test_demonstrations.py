@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import make_config
-from tests.drive.conftest import drive_conf, road_simulator, town_route
+from tests.drive.conftest import drive_conf, road_simulator, tiny_demos, town_route
 from topoloc.drive.controller_training import DemoData
 from topoloc.drive.demonstrations import (
     LOCAL_PATH_M,
@@ -176,3 +176,47 @@ def test_wide_middle_share_draws_routes_in_the_middle_of_wide_unmarked_roads(tow
     with caplog.at_level("WARNING"):
         assert training_route(0, conf, None, lambda rng: narrow, wide_middle_share=1.0) is narrow
     assert "wide_middle_share" in caplog.text
+
+
+def test_pooled_maps_keep_their_steps_and_each_map_gives_validation_routes():
+    """Demonstrations.pool: every map's steps, in order, under route ids of their own (route k of map i: k * n + i),
+    so the last val_routes routes, DemoData's validation routes, come from every map."""
+    maps = [tiny_demos([0, 1, 2, 3], tag=0.0), tiny_demos([0, 1, 2, 3], tag=100.0), tiny_demos([0, 1, 2, 3], tag=200.0)]
+    pooled = Demonstrations.pool(maps)
+    assert len(pooled) == sum(len(m) for m in maps) and pooled.conditions == ["clear_noon", "rain"]
+    at = np.cumsum([0, *(len(m) for m in maps)])
+    for i, m in enumerate(maps):
+        part = slice(at[i], at[i + 1])
+        np.testing.assert_array_equal(pooled.images[part], m.images)
+        np.testing.assert_array_equal(pooled.speed[part], m.speed)
+        np.testing.assert_array_equal(pooled.condition[part], m.condition)
+        np.testing.assert_array_equal(pooled.route[part], m.route * 3 + i)
+    # a route's steps stay one route, and no two maps' routes share an id
+    ids = {(i, r): set(pooled.route[at[i]:at[i + 1]][m.route == r]) for i, m in enumerate(maps) for r in range(4)}
+    assert all(len(v) == 1 for v in ids.values()) and len(set.union(*ids.values())) == 12
+    last = np.unique(pooled.route)[-3:]
+    assert sorted(int(r) % 3 for r in last) == [0, 1, 2]  # one validation route of each map
+    data = DemoData(pooled, 3, {"batch_size": 4, "batches_per_epoch": 1, "seed": 0}, 12.0)
+    assert {int(s) // 100 for s in pooled.speed[data.val_idx]} == {0, 1, 2}  # the steps of every map validate
+
+
+def test_maps_with_other_images_or_conditions_do_not_pool():
+    base = tiny_demos([0, 1])
+    with pytest.raises(ValueError, match="images"):
+        Demonstrations.pool([base, tiny_demos([0, 1], shape=(4, 6, 1))])
+    with pytest.raises(ValueError, match="images"):
+        Demonstrations.pool([base, tiny_demos([0, 1], shape=(5, 6, 3))])
+    with pytest.raises(ValueError, match="conditions"):
+        Demonstrations.pool([base, tiny_demos([0, 1], conditions=("rain", "clear_noon"))])  # the indices would mean others
+    with pytest.raises(ValueError, match="conditions"):
+        Demonstrations.pool([base, base, tiny_demos([0, 1], conditions=("clear_noon",))])
+
+
+def test_maps_with_fewer_routes_still_give_validation_routes():
+    """Maps of other route counts (drive.demonstrations.routes set per region) pool with their last routes side by
+    side: the last routes of the pooled set are still every map's last ones."""
+    pooled = Demonstrations.pool([tiny_demos(list(range(10)), tag=0.0), tiny_demos([0, 1, 2], tag=100.0)])
+    assert len(np.unique(pooled.route)) == 13
+    last = np.unique(pooled.route)[-2:]
+    assert {int(s) // 100 for s in pooled.speed[np.isin(pooled.route, last)]} == {0, 1}
+    assert {int(s) % 100 // 3 for s in pooled.speed[np.isin(pooled.route, last)]} == {9, 2}  # each map's last route

@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from tests.conftest import make_config
-from tests.drive.conftest import BASELINES, ConstantSteer, drive_conf, node_at, route_scene
+from tests.drive.conftest import BASELINES, ConstantSteer, drive_conf, node_at, route_scene, tiny_demos
 from topoloc.config import deep_merge
 from topoloc.drive import simulate_demonstrations, train_controller
 from topoloc.drive.config_slices import controller_slice
@@ -21,7 +21,15 @@ from topoloc.drive.controller import load_controller
 from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.drive_route import build_route
 from topoloc.drive.expert import Expert, ExpertSettings
-from topoloc.drive.on_policy import DaggerSettings, closed_loop_check, drive_on_policy, offset_ahead
+from topoloc.drive.camera import image_shape
+from topoloc.drive.on_policy import (
+    DaggerSettings,
+    check_metrics,
+    check_route,
+    closed_loop_check,
+    drive_on_policy,
+    offset_ahead,
+)
 from topoloc.drive.route_planning import plan_route
 from topoloc.drive.routes import make_simulator, random_drive_route
 from topoloc.drive.simulator import OUTCOMES, SUCCESS, Simulator, VehicleSpec
@@ -191,3 +199,67 @@ def test_train_controller_runs_its_dagger_rounds_and_check_on_the_town(town, tmp
     assert metrics["train_steps"] == np.sum(demos.route < demos.route.max())  # all but the one validation route
     assert not any(k.startswith(("check/", "dagger/")) for k in metrics)
     assert "round" not in pd.read_csv(outputs["history"]).columns  # written again, by a fit without DAgger rounds
+
+
+def test_the_check_metrics_count_each_condition_and_outcome():
+    rows = [("overcast", SUCCESS, 1.0), ("rain", "off_road", 0.25), ("overcast", "off_road", 0.5),
+            ("sunset", SUCCESS, 1.0), ("overcast", "reversed", 0.75)]
+    assert check_metrics(rows) == pytest.approx({
+        "check/routes": 5.0, "check/success_rate": 0.4, "check/share_driven": 0.7, "check/success_overcast": 1 / 3,
+        "check/success_rain": 0.0, "check/success_sunset": 1.0, "check/off_road": 2.0, "check/reversed": 1.0})
+    assert check_metrics([("rain", SUCCESS, 1.0)]) == {"check/routes": 1.0, "check/success_rate": 1.0,
+                                                        "check/share_driven": 1.0, "check/success_rain": 1.0}
+
+
+def test_routes_checked_one_by_one_in_any_order_give_the_closed_loop_check(straight):
+    """check_route depends on the route index and the config alone: the routes checked last to first give
+    closed_loop_check's metrics (so they can be checked in parallel)."""
+    drive, sim = straight
+    follow = {"start_lateral_m": 0.8, "start_yaw_deg": 4.0}
+    conf = {"drive": deep_merge(drive, {"check": {"routes": 3}, "follow": follow}),
+            "place": {"image": {"color": True}, "repeat_conditions": ["overcast", "rain"]}}
+    makers = (lambda rng: sim.route, lambda route: sim)
+    controller = ConstantSteer(0.0, drive)  # straight on: off the road from some starts, not from others
+    rows = {r: check_route(r, controller, "dlm", conf, None, *makers) for r in (2, 1, 0)}
+    assert [rows[r][0] for r in range(3)] == ["overcast", "rain", "overcast"]
+    assert {rows[r][1] for r in range(3)} >= {SUCCESS, "off_road"} and len({rows[r][2] for r in range(3)}) > 1
+    assert closed_loop_check(controller, "dlm", conf, None, *makers) == check_metrics([rows[r] for r in range(3)])
+
+
+def demos_conf() -> dict:
+    """The config of train_controller's demonstrations: 64 x 48 place images, the default camera."""
+    return make_config(place={"image": {"width": 64, "height": 48}})
+
+
+def test_one_map_trains_on_its_own_demonstrations_and_several_are_pooled(tmp_path):
+    conf = demos_conf()
+    shape = image_shape(conf)
+    paths = {}
+    for name, routes, tag in (("a", [0, 1, 2], 0.0), ("b", [0, 1], 100.0)):
+        tiny_demos(routes, shape=shape, tag=tag).save(tmp_path / f"{name}.npz")
+        paths[name] = str(tmp_path / f"{name}.npz")
+    alone = train_controller.load_demonstrations(conf, {"demonstrations": paths["a"], "osm": "x.osm"})
+    np.testing.assert_array_equal(alone.route, [0, 0, 0, 1, 1, 1, 2, 2, 2])  # not renumbered
+    np.testing.assert_array_equal(alone.speed, np.arange(9))
+    pooled = train_controller.load_demonstrations(conf, {"demonstrations_a": paths["a"], "demonstrations_b": paths["b"],
+                                                         "osm": "x.osm", "graph": "x.graph"})
+    assert len(pooled) == 15 and len(np.unique(pooled.route)) == 5
+    np.testing.assert_array_equal(pooled.speed, [*range(9), *range(100, 106)])
+    last = np.unique(pooled.route)[-2:]
+    assert set(pooled.speed[np.isin(pooled.route, last)] // 100) == {0, 1}  # validation routes of both maps
+
+
+def test_demonstrations_of_another_camera_or_other_conditions_are_named(tmp_path):
+    conf = demos_conf()
+    h, w, c = image_shape(conf)
+    good, narrow, other = (str(tmp_path / f"{name}.npz") for name in ("good", "narrow", "other"))
+    tiny_demos([0, 1], shape=(h, w, c)).save(good)
+    tiny_demos([0, 1], shape=(h, w - 2, c)).save(narrow)
+    tiny_demos([0, 1], shape=(h, w, c), conditions=("clear_noon", "night")).save(other)
+    for inputs in ({"demonstrations": narrow}, {"demonstrations_a": good, "demonstrations_b": narrow}):
+        with pytest.raises(InputError, match=rf"^{narrow}: recorded with {w - 2}x{h}x{c} images, but drive.camera"):
+            train_controller.load_demonstrations(conf, inputs)
+    with pytest.raises(InputError, match=rf"^{other}: recorded under \['clear_noon', 'night'\], but {good} under"):
+        train_controller.load_demonstrations(conf, {"demonstrations_a": good, "demonstrations_b": other})
+    with pytest.raises(InputError, match=r"^drive.demonstrations_from"):
+        train_controller.load_demonstrations(conf, {"osm": good})

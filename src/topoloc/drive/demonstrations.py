@@ -109,7 +109,8 @@ class Demonstrations:
 
     @classmethod
     def pool(cls, maps: list[Demonstrations]) -> Demonstrations:
-        """The demonstrations of several maps as one set: route ``k`` of map ``i`` becomes route ``k * len(maps) + i``,
+        """The demonstrations of several maps as one set: route ``k`` of map ``i`` becomes route ``k * len(maps) + i``
+        (a map of fewer routes has its ``k`` shifted up to end with the others: its last route is the last of all too),
         so the last routes (the validation routes, :class:`~topoloc.drive.controller_training.DemoData`) come from
         every map in turn. ValueError when the maps' images or conditions differ."""
         first = maps[0]
@@ -118,7 +119,9 @@ class Demonstrations:
                 raise ValueError(f"images of {other.images.shape[1:]} against {first.images.shape[1:]}")
             if other.conditions != first.conditions:
                 raise ValueError(f"conditions {other.conditions} against {first.conditions}")
-        renumbered = [replace(demos, route=demos.route * len(maps) + i) for i, demos in enumerate(maps)]
+        last = [int(demos.route.max()) if len(demos) else 0 for demos in maps]
+        renumbered = [replace(demos, route=(demos.route + max(last) - last[i]) * len(maps) + i)
+                      for i, demos in enumerate(maps)]
         return cls.concat(renumbered)
 
 
