@@ -18,8 +18,9 @@ they run on ``--workers`` processes; trainings run one after the other on the co
 (``drive.train.accelerator``: a GPU where there is one). A map's demonstrations and each trained controller are
 kept in ``--work`` and reused by a later run with the same settings.
 
-Prints per case and seed the check's success rate, the share of each route driven and the success per condition,
-then each case's mean and spread over the seeds.
+Prints per case and seed the check's success rate, the share of each route driven, the success per condition and
+the junctions reached that were taken as commanded (:mod:`topoloc.drive.junctions`: all, and the turns alone), then
+each case's mean and spread over the seeds; every junction of every check drive goes to ``<out>.junctions.csv``.
 """
 
 from __future__ import annotations
@@ -45,10 +46,13 @@ from topoloc.config import deep_merge, dotted_overrides, validate_and_fill
 from topoloc.drive.controller import load_controller
 from topoloc.drive.controller_training import fit
 from topoloc.drive.demonstrations import Demonstrations, collect_demonstrations, demonstrate_route
+from topoloc.drive.junctions import NOT_REACHED, TAKEN, junction_results, roundabout_ways, route_junctions
 from topoloc.drive.on_policy import check_metrics, check_route
 from topoloc.drive.routes import make_simulator, random_drive_route, teach_route
+from topoloc.drive.simulator import OUTCOMES
 from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.graph.road_graph import RoadGraph
+from topoloc.io import atomic_path
 
 REPO = Path(__file__).resolve().parent.parent
 log = logging.getLogger("bench_drive_maps")
@@ -59,7 +63,7 @@ _STATE: dict[str, Any] = {}
 
 def _init_worker(conf: dict[str, Any], maps: dict[str, str]) -> None:
     torch.set_num_threads(1)
-    _STATE.update(conf=conf, maps=maps, loaded={}, models={})
+    _STATE.update(conf=conf, maps=maps, loaded={}, models={}, junctions={})
 
 
 def _map(name: str) -> tuple[Any, Any, Any]:
@@ -72,6 +76,7 @@ def _map(name: str) -> tuple[Any, Any, Any]:
         _STATE["loaded"][name] = (teach_route(graph, conf).xy,
                                   lambda rng, g=graph: random_drive_route(g, conf, length, rng),
                                   lambda route, g=graph, o=osm: make_simulator(o, g, route, conf))
+        _STATE["junctions"][name] = (graph, roundabout_ways(osm))
     return _STATE["loaded"][name]
 
 
@@ -81,14 +86,23 @@ def _demonstrate(task: tuple[str, int]) -> tuple[str, int, Any]:
     return name, r, demonstrate_route(r, _STATE["conf"], avoid, make_route, make_sim)
 
 
-def _check(task: tuple[str, str, int, str]) -> tuple[str, int, tuple[str, str, float]]:
+def _check(task: tuple[str, str, int, str]) -> tuple[str, int, tuple[str, str, float], list[dict[str, Any]]]:
     key, model_path, r, test = task
+    conf = _STATE["conf"]
+    agent = str(conf["controller"])
     if model_path not in _STATE["models"]:
-        agent = str(_STATE["conf"]["controller"])
         _STATE["models"][model_path] = load_controller(model_path, cls=CONTROLLERS[agent]).eval()
     avoid, make_route, make_sim = _map(test)
-    conf = _STATE["conf"]
-    return key, r, check_route(r, _STATE["models"][model_path], str(conf["controller"]), conf, avoid, make_route, make_sim)
+    made = []  # the route's simulator, for where the drive ended
+    row = check_route(r, _STATE["models"][model_path], agent, conf, avoid, make_route,
+                      lambda route: made.append(make_sim(route)) or made[-1])
+    graph, roundabouts = _STATE["junctions"][test]
+    jconf = conf["drive"]["follow"]["junctions"]
+    sim = made[-1]
+    junctions = route_junctions(graph, sim.route, roundabouts, float(jconf["cluster_m"]), float(jconf["around_m"]))
+    rows = junction_results(junctions, np.array([sim.s]), np.array([np.nan]), row[1], float(jconf["before_m"]),
+                            float(jconf["after_m"]))
+    return key, r, row, rows
 
 
 def digest(value: Any) -> str:
@@ -151,6 +165,18 @@ def _train_task(task: tuple[Path, list[str], int, dict[str, Any], dict[str, Path
     return train(*task)
 
 
+def junction_columns(rows: pd.DataFrame) -> dict[str, float]:
+    """The share of the junctions reached that were taken as commanded (:mod:`topoloc.drive.junctions`), over all and
+    for the turns (every turn class but ``straight``), and how many were reached."""
+    if rows.empty:
+        return {"junctions taken": float("nan"), "turns taken": float("nan"), "junctions reached": 0.0}
+    reached = rows[rows.result != NOT_REACHED]
+    turns = reached[reached.turn != "straight"]
+    return {"junctions taken": float((reached.result == TAKEN).mean()) if len(reached) else float("nan"),
+            "turns taken": float((turns.result == TAKEN).mean()) if len(turns) else float("nan"),
+            "junctions reached": float(len(reached))}
+
+
 def summary(rows: pd.DataFrame) -> pd.DataFrame:
     """Each case's mean and sample standard deviation over its seeds."""
     out = []
@@ -159,8 +185,9 @@ def summary(rows: pd.DataFrame) -> pd.DataFrame:
         for column in rows.columns:
             if column in ("case", "seed") or not np.issubdtype(group[column].dtype, np.number):
                 continue
-            values = group[column].to_numpy(float)
-            row[column] = f"{values.mean():.2f} +- {values.std(ddof=1) if len(values) > 1 else 0.0:.2f}"
+            values = group[column].dropna().to_numpy(float)
+            spread = values.std(ddof=1) if len(values) > 1 else 0.0
+            row[column] = f"{values.mean():.2f} +- {spread:.2f}" if len(values) else "-"
         out.append(row)
     return pd.DataFrame(out)
 
@@ -223,8 +250,10 @@ def main(argv: list[str] | None = None) -> int:
                  for case, _, test in cases for seed in seeds for r in range(routes)]
         started = time.perf_counter()
         checked: dict[str, list[tuple[int, Any]]] = {}
-        for key, r, row in pool.map(_check, tasks):
+        junctions: dict[str, list[dict[str, Any]]] = {}
+        for key, r, row, rows in pool.map(_check, tasks):
             checked.setdefault(key, []).append((r, row))
+            junctions.setdefault(key, []).extend(rows)
         log.info("checks: %d routes in %.0f s", len(tasks), time.perf_counter() - started)
 
     rows = []
@@ -233,12 +262,19 @@ def main(argv: list[str] | None = None) -> int:
             metrics = check_metrics([row for _, row in sorted(checked[f"{case}|{seed}"])])
             rows.append({"case": case, "seed": seed,
                          "val steer MAE": trained[(case, seed)].get("best/val/steer_mae", float("nan")),
-                         **{k.removeprefix("check/"): v for k, v in metrics.items() if k != "check/routes"}})
-    table = pd.DataFrame(rows).fillna(0.0)
+                         **{k.removeprefix("check/"): v for k, v in metrics.items() if k != "check/routes"},
+                         **junction_columns(pd.DataFrame(junctions[f"{case}|{seed}"]))})
+    table = pd.DataFrame(rows)
+    counts = [c for c in table.columns if c.startswith("success_") or c in OUTCOMES]
+    table[counts] = table[counts].fillna(0.0)  # a condition or failure a seed did not meet: none of it
     text = (f"{args.agent}, {routes} check routes per case and seed\n\n" + table.to_markdown(index=False, floatfmt=".2f")
             + "\n\n" + summary(table).to_markdown(index=False))
     with markdown_copy(args.out):
         print(text)
+    junction_rows = pd.DataFrame([{"case": key.split("|")[0], "seed": int(key.split("|")[1]), **row}
+                                  for key, rows in junctions.items() for row in rows])
+    with atomic_path(Path(args.out).with_suffix(".junctions.csv")) as tmp:
+        junction_rows.to_csv(tmp, index=False)
     return 0
 
 
