@@ -146,7 +146,8 @@ def controller_path(case: str, train_maps: list[str], seed: int, conf: dict[str,
     return work / f"controller_{case.replace('+', '_').replace(':', '-')}_{seed}_{key}.ckpt"
 
 
-def train(path: Path, train_maps: list[str], seed: int, conf: dict[str, Any], demo_paths: dict[str, Path]) -> dict[str, float]:
+def train(path: Path, train_maps: list[str], seed: int, conf: dict[str, Any],
+          demo_paths: dict[str, Path]) -> dict[str, float]:
     """Train the controller at ``path`` on ``train_maps``' demonstrations pooled; its metrics (also beside it)."""
     drive = deep_merge(conf["drive"], {"train": {"seed": seed, "log_model": False}})
     maps = [Demonstrations.load(demo_paths[n]) for n in train_maps]
@@ -231,8 +232,8 @@ def main(argv: list[str] | None = None) -> int:
         todo = [(case, train_maps, seed) for case, train_maps, _ in cases for seed in seeds
                 if not (models[(case, seed)].exists() and models[(case, seed)].with_suffix(".json").exists())]
         if todo:
-            demo_paths = record_demonstrations(list(dict.fromkeys(n for _, ms, _ in todo for n in ms)), conf, maps, work,
-                                               pool)
+            needed = list(dict.fromkeys(n for _, train_maps, _ in todo for n in train_maps))
+            demo_paths = record_demonstrations(needed, conf, maps, work, pool)
             tasks = [(models[(case, seed)], train_maps, seed, conf, demo_paths) for case, train_maps, seed in todo]
             started = time.perf_counter()
             if args.train_workers > 1:
@@ -267,7 +268,8 @@ def main(argv: list[str] | None = None) -> int:
     table = pd.DataFrame(rows)
     counts = [c for c in table.columns if c.startswith("success_") or c in OUTCOMES]
     table[counts] = table[counts].fillna(0.0)  # a condition or failure a seed did not meet: none of it
-    text = (f"{args.agent}, {routes} check routes per case and seed\n\n" + table.to_markdown(index=False, floatfmt=".2f")
+    text = (f"{args.agent}, {routes} check routes per case and seed\n\n"
+            + table.to_markdown(index=False, floatfmt=".2f")
             + "\n\n" + summary(table).to_markdown(index=False))
     with markdown_copy(args.out):
         print(text)

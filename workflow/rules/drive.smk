@@ -30,7 +30,8 @@ rule simulate_demonstrations:
 
 rule train_controller:
     """Train Topo-DLM or Topo-LP (Lightning; then DAgger rounds in the simulator and the closed-loop check on unseen
-    routes); the model is logged to MLflow with its signature."""
+    routes) on this region's demonstrations, or on those of drive.demonstrations_from pooled; the model is logged to
+    MLflow with its signature."""
     input:
         unpack(demonstration_inputs),
         osm=rules.download_osm.output.osm,

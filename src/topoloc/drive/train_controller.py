@@ -2,9 +2,10 @@
 ``conf["controller"]``: ``dlm`` or ``lp``) on the expert's demonstrations.
 
 Data: the demonstrations of ``simulate_demonstrations`` (this region's, or those of the regions of
-``drive.demonstrations_from`` pooled: a controller trained on several maps, checked on this one), split and drawn as :mod:`topoloc.drive.controller_training`
-says. Trained by :func:`topoloc.drive.controller_training.fit` (the shared Lightning path): the best checkpoint is written to
-``model`` and logged to MLflow as a PyTorch model with its signature (``(N, C + 2, H, W)`` -> ``(N, 2)``).
+``drive.demonstrations_from`` pooled: a controller trained on several maps, checked on this one), split and drawn as
+:mod:`topoloc.drive.controller_training` says. Trained by :func:`topoloc.drive.controller_training.fit` (the shared
+Lightning path): the best checkpoint is written to ``model`` and logged to MLflow as a PyTorch model with its
+signature (``(N, C + 2, H, W)`` -> ``(N, 2)``).
 Then ``drive.dagger.rounds`` DAgger rounds (:mod:`topoloc.drive.on_policy`): the controller drives the training routes
 in the simulator (inputs ``osm`` and ``graph``), the expert labels the states it reached, and it trains on,
 ``dagger.epochs`` epochs a round; the model of the last round is written. Last, the closed-loop check
@@ -47,7 +48,8 @@ def load_demonstrations(conf: dict[str, Any], inputs: dict[str, str]) -> Demonst
                              f"{want_w}x{want_h}x{want_c}: simulate the demonstrations again")
         if maps and demos.conditions != maps[0].conditions:
             raise InputError(path, f"recorded under {demos.conditions}, but {paths[0]} under {maps[0].conditions} "
-                             "(drive.demonstrations.conditions must be the same in every region of drive.demonstrations_from)")
+                             "(drive.demonstrations.conditions must be the same in every region of "
+                             "drive.demonstrations_from)")
         maps.append(demos)
     if len(maps) > 1:
         log.info("pooled the demonstrations of %d maps: %s", len(maps), {p: len(d) for p, d in zip(paths, maps)})
@@ -55,9 +57,10 @@ def load_demonstrations(conf: dict[str, Any], inputs: dict[str, str]) -> Demonst
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
-    """Train on ``inputs['demonstrations']`` (or the pooled ``demonstrations_<map>``: :func:`load_demonstrations`), then ``drive.dagger.rounds`` DAgger rounds on the training routes and the
-    closed-loop check on ``drive.check.routes`` others (inputs ``osm``, ``graph``); write ``model``, ``history`` (with
-    its ``round``), ``metrics`` (``check/...`` among them) and ``figure``."""
+    """Train on ``inputs['demonstrations']`` (or the pooled ``demonstrations_<map>``: :func:`load_demonstrations`),
+    then ``drive.dagger.rounds`` DAgger rounds on the training routes and the closed-loop check on
+    ``drive.check.routes`` others (inputs ``osm``, ``graph``); write ``model``, ``history`` (with its ``round``),
+    ``metrics`` (``check/...`` among them) and ``figure``."""
     drive = conf["drive"]
     demos = load_demonstrations(conf, inputs)
     agent = str(conf.get("controller", "dlm"))
