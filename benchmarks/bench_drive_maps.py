@@ -7,20 +7,22 @@ them)::
     python -m benchmarks.bench_drive_maps --map helsinki=results/helsinki --map heidelberg=results/heidelberg \\
         --map kitti00=results/kitti00 --case helsinki+heidelberg:kitti00 --case helsinki:kitti00 \\
         [--configfile config/config.yaml --configfile config/experiments/drive_paper.yaml ...] \\
-        [--set drive.check.routes=100 ...] [--agent lp] [--seeds 0,1,2] [--workers N] [--work DIR] [--out FILE]
+        [--set drive.check.routes=100 ...] [--agent lp] [--seeds 0,1,2] [--workers N] [--train-workers N]
+        [--train-only] [--work DIR] [--out FILE]
 
 A case ``TRAIN+TRAIN:TEST`` trains one controller per seed on the named maps' demonstrations pooled
 (:meth:`topoloc.drive.demonstrations.Demonstrations.pool`, what ``drive.demonstrations_from`` does in the
 pipeline) and checks it on ``drive.check.routes`` random routes of the test map
 (:func:`topoloc.drive.on_policy.check_route`, the check of ``train_controller``). The config files are merged in
 order (later ones win), then ``--set``. Demonstration routes and check routes are independent of each other, so
-they run on ``--workers`` processes; trainings run one after the other on the configured accelerator
-(``drive.train.accelerator``: a GPU where there is one). A map's demonstrations and each trained controller are
+they run on ``--workers`` processes; trainings run one after the other, or ``--train-workers`` at once (processes
+sharing the GPU), on the configured accelerator (``drive.train.accelerator``: a GPU where there is one). A map's demonstrations and each trained controller are
 kept in ``--work`` and reused by a later run with the same settings.
 
 Prints per case and seed the check's success rate, the share of each route driven, the success per condition and
 the junctions reached that were taken as commanded (:mod:`topoloc.drive.junctions`: all, and the turns alone), then
-each case's mean and spread over the seeds; every junction of every check drive goes to ``<out>.junctions.csv``.
+each case's mean and spread over the seeds; every junction of every check drive goes to ``<out>.junctions.csv``
+(``<out>`` without its ``.md``).
 """
 
 from __future__ import annotations
