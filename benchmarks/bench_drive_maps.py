@@ -16,8 +16,8 @@ pipeline) and checks it on ``drive.check.routes`` random routes of the test map
 (:func:`topoloc.drive.on_policy.check_route`, the check of ``train_controller``). The config files are merged in
 order (later ones win), then ``--set``. Demonstration routes and check routes are independent of each other, so
 they run on ``--workers`` processes; trainings run one after the other, or ``--train-workers`` at once (processes
-sharing the GPU), on the configured accelerator (``drive.train.accelerator``: a GPU where there is one). A map's demonstrations and each trained controller are
-kept in ``--work`` and reused by a later run with the same settings.
+sharing the GPU), on the configured accelerator (``drive.train.accelerator``: a GPU where there is one). A map's
+demonstrations and each trained controller are kept in ``--work`` and reused by a later run with the same settings.
 
 Prints per case and seed the check's success rate, the share of each route driven, the success per condition and
 the junctions reached that were taken as commanded (:mod:`topoloc.drive.junctions`: all, and the turns alone), then
