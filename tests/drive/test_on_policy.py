@@ -16,12 +16,12 @@ from tests.conftest import make_config
 from tests.drive.conftest import BASELINES, ConstantSteer, drive_conf, node_at, route_scene, tiny_demos
 from topoloc.config import deep_merge
 from topoloc.drive import simulate_demonstrations, train_controller
+from topoloc.drive.camera import image_shape
 from topoloc.drive.config_slices import controller_slice
 from topoloc.drive.controller import load_controller
 from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.drive_route import build_route
 from topoloc.drive.expert import Expert, ExpertSettings
-from topoloc.drive.camera import image_shape
 from topoloc.drive.on_policy import (
     DaggerSettings,
     check_metrics,
