@@ -41,10 +41,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import torch
-import yaml
 
 from benchmarks.markdown import add_out_option, markdown_copy
-from topoloc.config import deep_merge, dotted_overrides, validate_and_fill
+from topoloc.config import deep_merge, dotted_overrides, load
 from topoloc.drive.controller import load_controller
 from topoloc.drive.controller_training import fit
 from topoloc.drive.demonstrations import Demonstrations, collect_demonstrations, demonstrate_route
@@ -65,7 +64,7 @@ _STATE: dict[str, Any] = {}
 
 def _init_worker(conf: dict[str, Any], maps: dict[str, str]) -> None:
     torch.set_num_threads(1)
-    _STATE.update(conf=conf, maps=maps, loaded={}, models={}, junctions={})
+    _STATE.update(conf=conf, maps=maps, loaded={}, graphs={}, roundabouts={}, models={})
 
 
 def _map(name: str) -> tuple[Any, Any, Any]:
@@ -78,7 +77,7 @@ def _map(name: str) -> tuple[Any, Any, Any]:
         _STATE["loaded"][name] = (teach_route(graph, conf).xy,
                                   lambda rng, g=graph: random_drive_route(g, conf, length, rng),
                                   lambda route, g=graph, o=osm: make_simulator(o, g, route, conf))
-        _STATE["junctions"][name] = (graph, roundabout_ways(osm))
+        _STATE["graphs"][name] = (graph, osm)
     return _STATE["loaded"][name]
 
 
@@ -98,7 +97,10 @@ def _check(task: tuple[str, str, int, str]) -> tuple[str, int, tuple[str, str, f
     made = []  # the route's simulator, for where the drive ended
     row = check_route(r, _STATE["models"][model_path], agent, conf, avoid, make_route,
                       lambda route: made.append(make_sim(route)) or made[-1])
-    graph, roundabouts = _STATE["junctions"][test]
+    graph, osm = _STATE["graphs"][test]
+    if test not in _STATE["roundabouts"]:  # read from the OSM file of a map that is checked, once per process
+        _STATE["roundabouts"][test] = roundabout_ways(osm)
+    roundabouts = _STATE["roundabouts"][test]
     jconf = conf["drive"]["follow"]["junctions"]
     sim = made[-1]
     junctions = route_junctions(graph, sim.route, roundabouts, float(jconf["cluster_m"]), float(jconf["around_m"]))
@@ -211,12 +213,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
 
-    data: dict[str, Any] = {}
-    for path in args.configfile or [str(REPO / "config" / "config.yaml")]:
-        data = deep_merge(data, yaml.safe_load(Path(path).read_text()) or {})
-    data = deep_merge(data, dotted_overrides(args.set))
-    data.pop("regions", None)
-    conf = validate_and_fill(data, "bench_drive_maps") | {"controller": args.agent}
+    conf = load(args.configfile or [REPO / "config" / "config.yaml"], dotted_overrides(args.set))
+    conf["controller"] = args.agent
     maps = dict(item.split("=", 1) for item in args.map)
     cases = [(c, c.split(":")[0].split("+"), c.split(":")[1]) for c in args.case]
     for case, train_maps, test in cases:

@@ -85,6 +85,23 @@ def test_load_rejects_a_bad_key_with_one_line_naming_it(overrides, expected):
     assert str(err.value).startswith(expected) and "\n" not in str(err.value)
 
 
+def test_load_merges_several_files_in_order(tmp_path):
+    from topoloc.config import load
+    from topoloc.errors import InputError
+
+    base, experiment = tmp_path / "base.yaml", tmp_path / "experiment.yaml"
+    base.write_text("region: {name: x}\ndrive: {demonstrations: {routes: 20, val_routes: 2}}\n")
+    experiment.write_text("drive: {demonstrations: {routes: 80}}\n")
+    conf = load([base, experiment], {"drive": {"check": {"routes": 5}}})
+    assert conf["region"]["name"] == "x"
+    assert conf["drive"]["demonstrations"]["routes"] == 80  # the later file wins
+    assert conf["drive"]["demonstrations"]["val_routes"] == 2  # and keeps what it does not set
+    assert conf["drive"]["check"]["routes"] == 5
+    experiment.write_text("- a list\n")
+    with pytest.raises(InputError, match=rf"^{experiment}: a config file is a YAML mapping"):
+        load([base, experiment])
+
+
 def test_load_names_the_file(tmp_path):
     from topoloc.config import load
     from topoloc.errors import InputError

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import copy
 import functools
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -84,17 +84,22 @@ def check_drives(odometry: Mapping[str, Any]) -> None:
                              "set one of them to place the drive on the map")
 
 
-def load(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """The config of ``path`` (a YAML file; None: no keys) updated by ``overrides``, defaults filled, validated.
+def load(path: str | Path | Sequence[str | Path] | None = None,
+         overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The config of ``path`` (a YAML file, or several merged in order as Snakemake's ``--configfile`` does; None: no
+    keys) updated by ``overrides``, defaults filled, validated.
 
     ``overrides`` is deep-merged onto the file (nested mappings merge, other values replace).
     A config without a region gets ``region.name: default``. InputError with one line naming
     the file or key when it is not a valid config.
     """
-    data = _yaml_mapping(Path(path), str(path), "the config file") if path is not None else {}
+    paths = [] if path is None else [path] if isinstance(path, (str, Path)) else list(path)
+    data: dict[str, Any] = {}
+    for one in paths:
+        data = deep_merge(data, _yaml_mapping(Path(one), str(one), "the config file"))
     data = deep_merge(data, overrides or {})
     data.setdefault("region", {"name": "default"})
-    return validate_and_fill(data, path)
+    return validate_and_fill(data, paths[-1] if paths else None)
 
 
 def region_configs(config: Mapping[str, Any], base_dir: str | Path = ".") -> dict[str, dict[str, Any]]:
