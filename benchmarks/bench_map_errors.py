@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--results", default="results/helsinki", help="pipeline results with graph/ and model/")
     parser.add_argument("--maps", default="region,dual_grid", help="base maps (experiments.map_errors.maps)")
     parser.add_argument("--errors", default="none,lateral,displacement,simplified,dual_as_one,two_way_as_dual,"
-                                            "missing_road,extra_road")
+                                            "missing_road,extra_road,wide_turns")
     parser.add_argument("--levels", default="medium")
     parser.add_argument("--drives", type=int, default=0, help="random drives besides the three hard shapes")
     parser.add_argument("--start-every", type=float, default=150.0)

@@ -3,6 +3,7 @@ hard-shaped drives have their shape, and the ground truth on the map is right.""
 
 from __future__ import annotations
 
+import dataclasses
 import networkx as nx
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from topoloc.experiments.maps import grid_osm
 from topoloc.graph.from_osm import build_road_graph
 from topoloc.localization.evaluation import Judge
 from topoloc.odometry.map_error_drives import drive, map_truth, walk
-from topoloc.odometry.map_errors import LEVELS, dual_carriageway_grid, make_map_pair
+from topoloc.odometry.map_errors import DEFAULT_TURN_SMOOTHING_M, LEVELS, dual_carriageway_grid, make_map_pair
 from topoloc.odometry.simulate import NOISE_LEVELS
 
 LOW = NOISE_LEVELS["low"]
@@ -64,6 +65,34 @@ def test_lateral_offset_every_true_point_at_the_drawn_offset(grid, level):
         left = np.column_stack([-np.sin(heading), np.cos(heading)])
         assert np.all(_distance_to(pair.map, sim.gt_xy[_inner(sim)] + offset * left) < 0.15)
         assert np.all(e >= 0)
+
+
+def _turn_radius(sim):
+    """The smallest radius the drive turns on (metres), its heading smoothed over 5 m."""
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(sim.gt_xy, axis=0).T))])
+    every = np.arange(0.0, cum[-1], 1.0)
+    yaw = np.interp(every, cum, np.unwrap(sim.gt_yaw))
+    curvature = np.abs(np.convolve(np.gradient(yaw), np.ones(5) / 5, "same"))
+    return 1.0 / curvature.max()
+
+
+@pytest.mark.parametrize("level", ["low", "medium", "high"])
+def test_wide_turns_round_the_same_corners_wider_and_shorter(grid, level):
+    pair = make_map_pair(grid, "wide_turns", level, np.random.default_rng(1))
+    low, high = pair.turn_smoothing_m
+    assert pair.map.num_edges == pair.truth.num_edges and (low, high) == LEVELS["wide_turns"][level]["turn_smoothing_m"]
+    # the same walk (a smoothing that does not vary draws nothing) with the other types' corners and this level's
+    plain = dataclasses.replace(pair, turn_smoothing_m=(DEFAULT_TURN_SMOOTHING_M,) * 2)
+    wider = dataclasses.replace(pair, turn_smoothing_m=((low + high) / 2.0,) * 2)
+    for seed in range(2):
+        a = drive(plain, "circle_block", 1000.0, LOW, np.random.default_rng(seed))
+        b = drive(wider, "circle_block", 1000.0, LOW, np.random.default_rng(seed))
+        assert b.route == a.route
+        # wider corners: a larger smallest radius, and metres less round the same block at every corner
+        assert _turn_radius(b) > 1.15 * _turn_radius(a), (_turn_radius(b), _turn_radius(a))
+        assert b.length_m < a.length_m - 0.5 * (len(a.route) - 1), (b.length_m, a.length_m)
+        edge, _ = map_truth(pair, b.edge, b.gt_xy, b.gt_yaw)
+        assert (edge >= 0).all()  # the map is the truth: every frame is on a map road
 
 
 def test_displacement_moves_nodes_and_bends_roads_within_the_level(grid):

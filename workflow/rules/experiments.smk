@@ -60,7 +60,7 @@ rule localize_map_errors:
         figures=f"{EXPERIMENT}/map_errors/{{error}}/figures.md",
         metrics=f"{EXPERIMENT}/map_errors/{{error}}/metrics.json",
     wildcard_constraints:
-        error="none|lateral|displacement|simplified|dual_as_one|two_way_as_dual|missing_road|extra_road",
+        error="|".join(["none", *MAP_ERROR_TYPES]),
     params:
         conf=lambda wildcards: experiment_conf(*LOCALIZATION_KEYS, "graph", map_errors=EXPERIMENTS["map_errors"],
                                                error=wildcards.error),

@@ -7,7 +7,7 @@ loop and rejoins it).
 
 Patterns (:data:`PATTERNS`), driven like :func:`topoloc.odometry.simulate.simulate_pattern_drive` (corners rounded by
 :func:`topoloc.motion.route.smooth_path`, frames about a metre apart) in a lane ``lane_offset_m`` right of the
-centreline, drawn per drive from the pair's range; walks respect one-way roads and take the pair's missing roads
+centreline and with corners smoothed over ``turn_smoothing_m``, each drawn per drive from the pair's range; walks respect one-way roads and take the pair's missing roads
 (detours) whenever they pass one:
 
 * ``random``: a random walk (no U-turn except at dead ends);
@@ -104,9 +104,9 @@ def walk(graph: RoadGraph, length_m: float, rng: np.random.Generator, rule: str 
     return route, froms
 
 
-def _path(graph: RoadGraph, route: list[int], froms: list[int], offset: float):
+def _path(graph: RoadGraph, route: list[int], froms: list[int], offset: float, smoothing: float):
     dense, labels = sample_route(graph, route, froms, DENSE_M)
-    return smooth_path(dense, labels, 1.0, 4.0, offset, MAX_TURN_DEG)
+    return smooth_path(dense, labels, 1.0, smoothing, offset, MAX_TURN_DEG)
 
 
 def _u_turn(end: NDArray, heading: float, offset: float, edge: int):
@@ -117,7 +117,7 @@ def _u_turn(end: NDArray, heading: float, offset: float, edge: int):
     return xy, a + np.pi / 2, np.full(len(a), edge)
 
 
-def _out_and_back(pair: MapPair, length_m: float, offset: float, rng: np.random.Generator):
+def _out_and_back(pair: MapPair, length_m: float, offset: float, smoothing: float, rng: np.random.Generator):
     graph = pair.truth
     if pair.dual:
         right, left, openings = pair.dual[int(rng.integers(len(pair.dual)))]
@@ -128,7 +128,7 @@ def _out_and_back(pair: MapPair, length_m: float, offset: float, rng: np.random.
         lap = float(graph.edges.length_m.iloc[lap_route].sum())
         laps = int(np.ceil(length_m / lap)) + 1
         route, froms = lap_route * laps + right, lap_froms * laps + rnodes
-        return (*_path(graph, route, froms, offset), route)
+        return (*_path(graph, route, froms, offset, smoothing), route)
     best: tuple[list[int], list[int]] = ([], [])
     for _ in range(20):  # on two-way roads only (it drives back along them), never back at a dead end
         route, froms = walk(graph, length_m / 3.0, rng)
@@ -148,7 +148,7 @@ def _out_and_back(pair: MapPair, length_m: float, offset: float, rng: np.random.
     xy, yaw, edge = [], [], []
     for k in range(3 + int(length_m // max(1.0, 3.0 * float(graph.edges.length_m.iloc[route].sum())))):
         r, f = legs[k % 2]
-        leg_xy, leg_yaw, leg_edge = _path(graph, r, f, offset)
+        leg_xy, leg_yaw, leg_edge = _path(graph, r, f, offset, smoothing)
         xy.append(leg_xy)
         yaw.append(leg_yaw)
         edge.append(leg_edge)
@@ -179,8 +179,10 @@ def drive(pair: MapPair, pattern: str, length_m: float, level: NoiseLevel, rng: 
         raise ValueError(f"pattern must be one of {PATTERNS}, got {pattern!r}")
     graph = pair.truth
     offset = float(rng.uniform(*pair.lane_offset_m))
+    low, high = pair.turn_smoothing_m  # drawn only where it varies: the other types' drives stay as they were
+    smoothing = float(rng.uniform(low, high)) if high > low else float(low)
     if pattern == "out_and_back":
-        xy, yaw, edge, route = _out_and_back(pair, length_m, offset, rng)
+        xy, yaw, edge, route = _out_and_back(pair, length_m, offset, smoothing, rng)
     else:
         found = _circle_block(graph, rng) if pattern == "circle_block" else None
         if found is None and pattern == "long_straight":
@@ -197,7 +199,7 @@ def drive(pair: MapPair, pattern: str, length_m: float, level: NoiseLevel, rng: 
                     found = (found[0][:i], found[1][:i])
                     break
         route = found[0]
-        xy, yaw, edge = _path(graph, *found, offset)
+        xy, yaw, edge = _path(graph, *found, offset, smoothing)
     if pattern != "circle_block":
         cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
         keep = cum <= length_m

@@ -23,6 +23,9 @@ Error types (:data:`ERROR_TYPES`) and what a level sets (:data:`LEVELS`; ``none`
 * ``missing_road``: the truth has parking lot / service road loops (off ``share`` of the roads, ``depth_m`` deep)
   that the map lacks; drives take them (:func:`topoloc.odometry.map_error_drives.drive`).
 * ``extra_road``: the map has roads (``share`` of them, never a bridge of the truth) that the truth lacks.
+* ``wide_turns``: the map is the truth; the drive rounds its corners more widely, smoothed over ``turn_smoothing_m``
+  (drawn per drive; the other types smooth over 4 m: about a 9 m radius at a right angle, KITTI 00's turns; KITTI
+  02's and 10's take 15-17 m), so it drives metres less through a junction than the map's path through the node.
 
 A :class:`MapPair` keeps, per true road, the map roads it corresponds to (``truth_to_map``; empty where the map
 lacks it), which the ground truth on the map uses.
@@ -40,7 +43,8 @@ from topoloc.graph.road_graph import EDGE_COLUMNS, RoadGraph
 from topoloc.odometry.map_edits import (add_detours, build_graph, copy_graph, curvy, displace, drop_roads, simplify,
                                         split_dual, straight_chains)
 
-ERROR_TYPES = ("lateral", "displacement", "simplified", "dual_as_one", "two_way_as_dual", "missing_road", "extra_road")
+ERROR_TYPES = ("lateral", "displacement", "simplified", "dual_as_one", "two_way_as_dual", "missing_road", "extra_road",
+               "wide_turns")
 LEVEL_NAMES = ("none", "low", "medium", "high")
 
 #: Per error type and level (low, medium, high) its parameters; ``none`` is always the map equal to the truth.
@@ -57,9 +61,13 @@ LEVELS: dict[str, dict[str, dict[str, Any]]] = {
     "missing_road": {"low": {"share": 0.02, "depth_m": (25.0, 45.0)}, "medium": {"share": 0.05, "depth_m": (25.0, 45.0)},
                      "high": {"share": 0.15, "depth_m": (25.0, 45.0)}},
     "extra_road": {"low": {"share": 0.03}, "medium": {"share": 0.08}, "high": {"share": 0.15}},
+    # smoothing 4 / 7 / 13 / 21 m: a right angle on a radius of about 9 / 11 / 18 / 27 m
+    "wide_turns": {"low": {"turn_smoothing_m": (4.0, 7.0)}, "medium": {"turn_smoothing_m": (7.0, 13.0)},
+                   "high": {"turn_smoothing_m": (13.0, 21.0)}},
 }
 
 DEFAULT_LANE_OFFSET_M = 1.5
+DEFAULT_TURN_SMOOTHING_M = 4.0
 
 
 @dataclass
@@ -67,7 +75,7 @@ class MapPair:
     """A true road network, the map a localizer sees, and how they correspond.
 
     ``truth_to_map[e]``: the map roads true road ``e`` is mapped as (empty: the map lacks it). ``lane_offset_m``:
-    the range the drive's lane offset is drawn from. ``dual``: the dual carriageways of the truth, each
+    the range the drive's lane offset is drawn from, ``turn_smoothing_m`` that of its corners' smoothing. ``dual``: the dual carriageways of the truth, each
     ``(right, left, openings)`` lists of true edge ids (``right`` one-way forward along the chain, ``left`` back,
     ``openings`` the median openings at the chain's nodes in chain order). ``detours``: the true edges of the
     missing roads (the drive prefers them)."""
@@ -78,6 +86,7 @@ class MapPair:
     level: str
     truth_to_map: dict[int, list[int]]
     lane_offset_m: tuple[float, float] = (DEFAULT_LANE_OFFSET_M, DEFAULT_LANE_OFFSET_M)
+    turn_smoothing_m: tuple[float, float] = (DEFAULT_TURN_SMOOTHING_M, DEFAULT_TURN_SMOOTHING_M)
     dual: list[tuple[list[int], list[int], list[int]]] = field(default_factory=list)
     detours: set[int] = field(default_factory=set)
 
@@ -127,6 +136,9 @@ def make_map_pair(base: RoadGraph, error: str, level: str, rng: np.random.Genera
     p = LEVELS[error][level]
     if error == "lateral":
         return MapPair(base, copy_graph(base), error, level, _identity(base), lane_offset_m=p["lane_offset_m"], dual=same)
+    if error == "wide_turns":
+        return MapPair(base, copy_graph(base), error, level, _identity(base), turn_smoothing_m=p["turn_smoothing_m"],
+                       dual=same)
     if error == "displacement":
         return MapPair(displace(base, p["node_m"], p["curve_m"], rng), copy_graph(base), error, level, _identity(base),
                        dual=same)
