@@ -6,7 +6,11 @@ a directed edge (a road in a direction its one-way tag allows, see
 of one (:mod:`topoloc.localization.metric.lane_chains`: the middle of a road, or a *turn*
 from the end of one road into the start of the next). A chain lies on at most
 two directed edges: it starts ``first_from`` metres into ``first_state`` and,
-``split`` metres further, may pass the node into ``second_state``.
+``split`` metres further, may pass the node into ``second_state``. Its
+``length`` is what a vehicle drives along it; a turn may be shorter than its
+path on the map through the node (a car cuts the corner on an arc: ``stretch``,
+map metres per metre driven), and its cells map driven metres onto the map in
+proportion.
 
 Every chain is cut into ``ceil(length / cell_m)`` cells of equal length; a cell
 stands for its centre. Per cell the grid knows its chain, its directed edge,
@@ -59,10 +63,18 @@ class Chains:
     weight: NDArray[np.float64] | None = None
     #: weight of the way the chain takes (several chains may be one way: a U-turn's two sweeps); None: ``weight``
     way: NDArray[np.float64] | None = None
+    #: map metres per metre driven along the chain (> 1: a turn whose arc is shorter than the map's path through
+    #: the node, :func:`topoloc.localization.metric.lane_chains.turn_arc_length`); None: 1
+    stretch: NDArray[np.float64] | None = None
 
     @property
     def num_chains(self) -> int:
         return len(self.length)
+
+    @property
+    def map_length(self) -> NDArray[np.float64]:
+        """Per chain, its length on the map (``length`` is what a vehicle drives)."""
+        return self.length if self.stretch is None else self.length * self.stretch
 
     @classmethod
     def of_states(cls, states: DirectedEdges) -> Chains:
@@ -119,7 +131,7 @@ class CellGrid:
     """Cells of at most ``cell_m`` metres on every chain of a road graph.
 
     Attributes, one entry per cell: ``chain``, ``offset`` (metres from the chain's start to the cell
-    centre), ``state`` (directed edge), ``state_offset`` (metres along it), ``edge`` (road id), ``xy``
+    centre, driven metres), ``state`` (directed edge), ``state_offset`` (metres along it), ``edge`` (road id), ``xy``
     (map position: ``lane_offset_m[state]`` right of the centreline, if given), ``heading`` (degrees
     counter-clockwise from +x) and ``to_node`` (metres to the nearest end of its directed edge); per chain:
     ``base`` (its first cell) and ``cell_len``. Only the answers' positions use ``xy``; the filters move and weigh
@@ -138,10 +150,11 @@ class CellGrid:
         self.base = np.concatenate([[0], np.cumsum(counts)])
         self.chain = np.repeat(np.arange(chains.num_chains), counts)
         self.offset = (np.arange(len(self.chain)) - self.base[self.chain] + 0.5) * self.cell_len[self.chain]
-        since_node = self.offset - chains.split[self.chain]  # metres past the node inside the chain (< 0 before)
+        on_map = self.offset if chains.stretch is None else self.offset * chains.stretch[self.chain]
+        since_node = on_map - chains.split[self.chain]  # map metres past the node inside the chain (< 0 before)
         second = (since_node >= 0) & (chains.second_state[self.chain] >= 0)
         self.state = np.where(second, chains.second_state[self.chain], chains.first_state[self.chain])
-        self.state_offset = np.where(second, since_node, chains.first_from[self.chain] + self.offset)
+        self.state_offset = np.where(second, since_node, chains.first_from[self.chain] + on_map)
         self.edge = states.edge[self.state]
         self.xy, plain = self._geometry(graph, heading_window_m / 2.0, lane_offset_m)
         self.heading = plain + np.degrees(self._turned_share(since_node, second) * chains.turn[self.chain])
@@ -155,8 +168,12 @@ class CellGrid:
         leaving = np.bincount(ch.first_state[turns], minlength=self.states.num_states)
         entering = np.bincount(ch.second_state[turns], minlength=self.states.num_states)
         coverage = np.where(second, entering[self.state], np.where(turns[self.chain], leaving[self.state], 1))
-        prior = self.cell_len[self.chain] / np.maximum(coverage, 1)
+        prior = self.cell_len[self.chain] * self._stretch / np.maximum(coverage, 1)
         return prior / prior.sum()
+
+    @property
+    def _stretch(self) -> NDArray[np.float64] | float:
+        return 1.0 if self.chains.stretch is None else self.chains.stretch[self.chain]
 
     def _geometry(self, graph: RoadGraph, half: float,
                   lane_offset_m: NDArray[np.float64] | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -181,7 +198,7 @@ class CellGrid:
         ends of the turn (cells of middles: 0)."""
         ch = self.chains
         before = ch.split[self.chain]
-        half = np.maximum(np.minimum(before, ch.length[self.chain] - before), 1e-9)
+        half = np.maximum(np.minimum(before, ch.map_length[self.chain] - before), 1e-9)
         near = np.clip(1.0 - np.abs(since_node) / half, 0.0, 1.0)
         return np.where(ch.second_state[self.chain] >= 0, near * np.abs(ch.turn[self.chain]), 0.0)
 
@@ -189,7 +206,7 @@ class CellGrid:
         """Share of the chain's turn still to come (< 0 after the node: the part not yet made), per cell."""
         ch = self.chains
         before = ch.split[self.chain]
-        after = ch.length[self.chain] - before
+        after = ch.map_length[self.chain] - before
         half = np.maximum(np.minimum(before, after), 1e-9)
         made = 0.5 + 0.5 * np.sin(0.5 * np.pi * np.clip(since_node / half, -1.0, 1.0))
         share = np.where(second, made - 1.0, made)

@@ -23,7 +23,7 @@ from topoloc.localization.metric.lane_chains import lane_chains
 
 TWO_PI = 2.0 * math.pi
 INT_SETTINGS = ("scale_classes", "coarse_factor", "coarse_min_cells", "coarse_handoff_cells")
-STR_SETTINGS = ("branches", "u_turns")
+STR_SETTINGS = ("branches", "u_turns", "turn_path")
 
 
 @dataclass(frozen=True)
@@ -53,6 +53,7 @@ class MetricSettings:
     node_offset_deg: float = 0.0
     u_turns: str = "always"
     u_turn_weight: float = 0.02
+    turn_path: str = "node"
 
     @classmethod
     def from_conf(cls, conf: dict) -> MetricSettings:
@@ -75,7 +76,8 @@ class MetricModel:
     def __init__(self, graph: RoadGraph, states: DirectedEdges, settings: MetricSettings,
                  lane_offset_m: NDArray[np.float64] | None = None) -> None:
         self.settings = settings
-        chains = lane_chains(graph, states, settings.turn_zone_m, settings.heading_window_m, settings.u_turn_weight)
+        chains = lane_chains(graph, states, settings.turn_zone_m, settings.heading_window_m, settings.u_turn_weight,
+                             settings.turn_path)
         self.grid = grid = CellGrid(graph, states, chains, settings.cell_m, settings.heading_window_m, lane_offset_m)
         n = grid.num_cells
         p = settings.step_jitter
