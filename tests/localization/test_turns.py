@@ -1,5 +1,6 @@
-"""Turn chains as long as a car drives them (``localization.metric.turn_path: arc``): a car cuts a corner on an arc,
-shorter than the map's path through the node, so a filter that moves it the map's length falls behind at every turn."""
+"""How the metric filter models a car turning: turn chains as long as a car drives them
+(``localization.metric.turn_path: arc``): a car cuts a corner on an arc, shorter than the map's path through the node,
+so a filter that moves it the map's length falls behind at every turn."""
 
 from __future__ import annotations
 
@@ -96,3 +97,4 @@ def test_the_filter_keeps_up_with_a_car_that_cuts_its_corners():
     # 1.2 m when written)
     assert np.median(error["arc"]) <= 1.5, np.median(error["arc"])
     assert np.median(error["node"]) >= np.median(error["arc"]) + 0.5, (np.median(error["node"]), np.median(error["arc"]))
+
