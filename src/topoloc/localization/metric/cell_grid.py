@@ -66,6 +66,10 @@ class Chains:
     #: map metres per metre driven along the chain (> 1: a turn whose arc is shorter than the map's path through
     #: the node, :func:`topoloc.localization.metric.lane_chains.turn_arc_length`); None: 1
     stretch: NDArray[np.float64] | None = None
+    #: on a turn that is a circular arc (``stretch`` set; 0 elsewhere): where the arc begins and how long it is, metres
+    #: driven from the chain's start; along it the heading turns evenly
+    arc_from: NDArray[np.float64] | None = None
+    arc_len: NDArray[np.float64] | None = None
 
     @property
     def num_chains(self) -> int:
@@ -209,6 +213,10 @@ class CellGrid:
         after = ch.map_length[self.chain] - before
         half = np.maximum(np.minimum(before, after), 1e-9)
         made = 0.5 + 0.5 * np.sin(0.5 * np.pi * np.clip(since_node / half, -1.0, 1.0))
+        if ch.arc_len is not None:  # a circular arc: the heading turns evenly with the distance driven along it
+            arc = ch.arc_len[self.chain]
+            even = np.clip((self.offset - ch.arc_from[self.chain]) / np.maximum(arc, 1e-9), 0.0, 1.0)
+            made = np.where(arc > 0, even, made)
         share = np.where(second, made - 1.0, made)
         return np.where(ch.second_state[self.chain] >= 0, share, 0.0)
 

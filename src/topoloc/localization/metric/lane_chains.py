@@ -57,20 +57,23 @@ def turn_arc_length(zone_in: NDArray[np.float64], zone_out: NDArray[np.float64],
 
 
 def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, heading_window_m: float,
-                u_turn_weight: float = 1.0, turn_path: str = "node") -> Chains:
+                u_turn_weight: float = 1.0, turn_path: str = "node", wide_zone_m: float = 0.0) -> Chains:
     """Middles and turn chains of ``graph`` (see the module docstring); a U-turn chain is entered with
     ``u_turn_weight`` times the share of any other turn (each of its two sweeps half of that); ``turn_path``
-    (``arc`` or ``node``) sets how long a turn chain is driven."""
+    (``arc`` or ``node``) sets how long a turn chain is driven. With ``wide_zone_m`` over ``turn_zone_m`` every turn
+    but a U-turn may also be driven widely, through zones of ``wide_zone_m`` (at most half the road): a middle then
+    ends that far before the node, where half of the vehicles take a wide turn and the others drive on to the turn
+    zone (an *approach*), take a turn there and drive out of it (an *exit*) to the next middle."""
     if turn_path not in TURN_PATHS:
         raise ValueError(f"turn_path must be one of {TURN_PATHS}, got {turn_path!r}")
     valid = np.flatnonzero(states.valid)
     length = states.length
     zone = np.where(states.valid, np.minimum(float(turn_zone_m), length / 2.0), 0.0)
-    middle_len = length - 2.0 * zone
-    has_middle = states.valid & (middle_len > 1e-6)
-    middles = np.flatnonzero(has_middle)
-    middle_of = np.full(states.num_states, -1)
-    middle_of[middles] = np.arange(len(middles))
+    wide = np.where(states.valid, np.minimum(max(float(wide_zone_m), float(turn_zone_m)), length / 2.0), 0.0)
+    core_len = length - 2.0 * wide
+    has_core = states.valid & (core_len > 1e-6)
+    has_edge = states.valid & (wide - zone > 1e-6)  # an exit after the start zone, an approach before the end one
+    cores, edged = np.flatnonzero(has_core), np.flatnonzero(has_edge)
     pairs = [(int(a), int(b)) for a in valid for b in states.next_states(int(a))]
     # a U-turn (back onto the same road) may sweep either way: left in right-hand traffic, right in left-hand
     # traffic or round a turning circle; its heading change of 180 deg alone cannot say which
@@ -78,33 +81,71 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     pairs += other_sweep
     src = np.array([a for a, _ in pairs], np.int64)
     dst = np.array([b for _, b in pairs], np.int64)
-    turn_of: dict[int, list[int]] = {}  # directed edge -> its turn chains (by the edge they leave)
-    first_turn = len(middles)
-    for k, a in enumerate(src):
-        turn_of.setdefault(int(a), []).append(first_turn + k)
     h_start, h_end = end_headings(graph, states, heading_window_m / 2.0)
     turn = np.angle(np.exp(1j * (h_start[dst] - h_end[src])))
     u_turn = dst == (src ^ 1)
     clockwise = np.arange(len(src)) >= len(src) - len(other_sweep)  # the copies appended above
     turn = np.where(u_turn, np.where(clockwise, -np.pi, np.pi), turn)
+    widens = np.flatnonzero(~u_turn & ((wide[src] - zone[src]) + (wide[dst] - zone[dst]) > 1e-6))
 
-    successors: list[list[int]] = [turn_of.get(int(s), []) for s in middles]
-    for b in dst:
-        successors.append([int(middle_of[b])] if has_middle[b] else turn_of.get(int(b), []))
+    # chain ids: exits, cores (the middles), approaches, turns, wide turns
+    n_edge, n_core, n_turn = len(edged), len(cores), len(src)
+    exit_of, core_of, approach_of = (np.full(states.num_states, -1) for _ in range(3))
+    exit_of[edged] = np.arange(n_edge)
+    core_of[cores] = n_edge + np.arange(n_core)
+    approach_of[edged] = n_edge + n_core + np.arange(n_edge)
+    first_turn, first_wide = n_edge + n_core + n_edge, n_edge + n_core + n_edge + n_turn
+    turns_of: dict[int, list[int]] = {}
+    for k, a in enumerate(src):
+        turns_of.setdefault(int(a), []).append(first_turn + k)
+    wides_of: dict[int, list[int]] = {}
+    for k, i in enumerate(widens):
+        wides_of.setdefault(int(src[i]), []).append(first_wide + k)
+
+    def branch(s: int) -> list[int]:  # where the middle of s ends: on to the turn zone, or a wide turn
+        return ([int(approach_of[s])] if has_edge[s] else turns_of.get(s, [])) + wides_of.get(s, [])
+
+    def after_exit(s: int) -> list[int]:  # wide_zone_m into s
+        return [int(core_of[s])] if has_core[s] else branch(s)
+
+    successors: list[list[int]] = [after_exit(int(s)) for s in edged] + [branch(int(s)) for s in cores]
+    successors += [turns_of.get(int(s), []) for s in edged]
+    successors += [[int(exit_of[b])] if has_edge[b] else after_exit(int(b)) for b in dst]
+    successors += [after_exit(int(dst[i])) for i in widens]
     counts = np.array([len(s) for s in successors], np.int64)
-    on_map = zone[src] + zone[dst]
-    driven = turn_arc_length(zone[src], zone[dst], turn) if turn_path == "arc" else on_map
-    driven = np.where(u_turn | (driven <= 1e-6), on_map, driven)
+
+    on_map = np.concatenate([zone[src] + zone[dst], wide[src[widens]] + wide[dst[widens]]])
+    both_turn = np.concatenate([turn, turn[widens]])
+    both_u = np.concatenate([u_turn, np.zeros(len(widens), bool)])
+    driven = on_map
+    zin = np.concatenate([zone[src], wide[src[widens]]])
+    zout = np.concatenate([zone[dst], wide[dst[widens]]])
+    if turn_path == "arc":
+        driven = turn_arc_length(zin, zout, both_turn)
+    curved = ~both_u & (driven > 1e-6)
+    driven = np.where(curved, driven, on_map)
+    arc_from = np.where(curved, zin - np.minimum(zin, zout), 0.0)  # straight up to the shorter zone's length
+    arc_len = np.where(curved, driven - (zin + zout - 2.0 * np.minimum(zin, zout)), 0.0)
+    n_wides = np.array([len(wides_of.get(int(s), [])) for s in edged], float)
+    turn_weight = np.where(u_turn, 0.5 * float(u_turn_weight), 1.0)
+    turn_way = np.where(u_turn, float(u_turn_weight), 1.0)
+    ones = np.ones(n_edge + n_core)
     return Chains(
-        length=np.concatenate([middle_len[middles], driven]),
+        length=np.concatenate([wide[edged] - zone[edged], core_len[cores], wide[edged] - zone[edged], driven]),
         next_ptr=np.concatenate([[0], np.cumsum(counts)]),
         next_idx=np.array([c for s in successors for c in s], np.int64),
-        first_state=np.concatenate([middles, src]),
-        first_from=np.concatenate([zone[middles], length[src] - zone[src]]),
-        split=np.concatenate([middle_len[middles], zone[src]]),
-        second_state=np.concatenate([np.full(len(middles), -1), dst]),
-        turn=np.concatenate([np.zeros(len(middles)), turn]),
-        weight=np.concatenate([np.ones(len(middles)), np.where(u_turn, 0.5 * float(u_turn_weight), 1.0)]),
-        way=np.concatenate([np.ones(len(middles)), np.where(u_turn, float(u_turn_weight), 1.0)]),
-        stretch=np.concatenate([np.ones(len(middles)), on_map / np.maximum(driven, 1e-9)]) if turn_path == "arc" else None,
+        first_state=np.concatenate([edged, cores, edged, src, src[widens]]),
+        first_from=np.concatenate([zone[edged], wide[cores], length[edged] - wide[edged], length[src] - zone[src],
+                                   length[src[widens]] - wide[src[widens]]]),
+        split=np.concatenate([wide[edged] - zone[edged], core_len[cores], wide[edged] - zone[edged], zone[src],
+                              wide[src[widens]]]),
+        second_state=np.concatenate([np.full(n_edge + n_core + n_edge, -1), dst, dst[widens]]),
+        turn=np.concatenate([np.zeros(n_edge + n_core + n_edge), turn, turn[widens]]),
+        # at a middle's end the approach takes as much as all the wide turns together: half of the vehicles each way
+        weight=np.concatenate([ones, np.maximum(n_wides, 1.0), turn_weight, np.ones(len(widens))]),
+        way=np.concatenate([ones, np.maximum(n_wides, 1.0), turn_way, np.ones(len(widens))]),
+        stretch=np.concatenate([np.ones(n_edge + n_core + n_edge), on_map / np.maximum(driven, 1e-9)])
+        if turn_path == "arc" else None,
+        arc_from=np.concatenate([np.zeros(n_edge + n_core + n_edge), arc_from]) if turn_path == "arc" else None,
+        arc_len=np.concatenate([np.zeros(n_edge + n_core + n_edge), arc_len]) if turn_path == "arc" else None,
     )
