@@ -15,7 +15,14 @@ On a turn chain the map heading sweeps smoothly from ``a``'s to ``b``'s
 With ``turn_path="arc"`` a turn chain is as long as a car drives it: the circular arc
 tangent to both roads where the shorter of the two zones ends (:func:`turn_arc_length`),
 shorter than the map's path through the node (by 3.4 m for a right angle between
-8 m zones). With ``"node"`` it is the map's path; U-turns keep it either way.
+8 m zones), and its heading turns evenly along the arc. With ``"node"`` it is the
+map's path; U-turns keep it either way.
+
+With ``wide_zone_m`` over ``turn_zone_m`` a vehicle may also turn widely: every turn
+but a U-turn has a second chain through zones of ``wide_zone_m``; a road's middle
+ends that far before its node, where half of the vehicles take a wide turn and the
+others drive on (an *approach*) to the turn zone, and after a turn drive out of it
+(an *exit*) to the next middle.
 """
 
 from __future__ import annotations
