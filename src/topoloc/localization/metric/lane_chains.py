@@ -49,6 +49,8 @@ def end_headings(graph: RoadGraph, states: DirectedEdges, half: float) -> tuple[
 #: Turns sharper than this are cut as this much: a fillet tangent at the zones' ends would be tighter than a car turns.
 MAX_ARC_TURN_DEG = 120.0
 TURN_PATHS = ("arc", "node")
+#: Turns below this have no wide way (``wide_zone_m``): a road that goes on nearly straight is driven alike either way.
+MIN_WIDE_TURN_DEG = 30.0
 
 
 def turn_arc_length(zone_in: NDArray[np.float64], zone_out: NDArray[np.float64],
@@ -93,7 +95,9 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     u_turn = dst == (src ^ 1)
     clockwise = np.arange(len(src)) >= len(src) - len(other_sweep)  # the copies appended above
     turn = np.where(u_turn, np.where(clockwise, -np.pi, np.pi), turn)
-    widens = np.flatnonzero(~u_turn & ((wide[src] - zone[src]) + (wide[dst] - zone[dst]) > 1e-6))
+    # a wide way through the node for every turn but a U-turn; a road that goes on within 30 deg is driven alike
+    widens = np.flatnonzero(~u_turn & (np.abs(turn) >= np.radians(MIN_WIDE_TURN_DEG))
+                            & ((wide[src] - zone[src]) + (wide[dst] - zone[dst]) > 1e-6))
 
     # chain ids: exits, cores (the middles), approaches, turns, wide turns
     n_edge, n_core, n_turn = len(edged), len(cores), len(src)
