@@ -7,8 +7,8 @@ loop and rejoins it).
 
 Patterns (:data:`PATTERNS`), driven like :func:`topoloc.odometry.simulate.simulate_pattern_drive` (corners rounded by
 :func:`topoloc.motion.route.smooth_path`, frames about a metre apart) in a lane ``lane_offset_m`` right of the
-centreline and with corners smoothed over ``turn_smoothing_m``, each drawn per drive from the pair's range; walks respect one-way roads and take the pair's missing roads
-(detours) whenever they pass one:
+centreline, with corners smoothed over ``turn_smoothing_m``, each drawn per drive from the pair's range; walks respect
+one-way roads and take the pair's missing roads (detours) whenever they pass one:
 
 * ``random``: a random walk (no U-turn except at dead ends);
 * ``out_and_back``: out, a U-turn, back to the start, a U-turn, out again (on two-way roads; the U-turn is a half

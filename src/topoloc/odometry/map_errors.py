@@ -75,9 +75,9 @@ class MapPair:
     """A true road network, the map a localizer sees, and how they correspond.
 
     ``truth_to_map[e]``: the map roads true road ``e`` is mapped as (empty: the map lacks it). ``lane_offset_m``:
-    the range the drive's lane offset is drawn from, ``turn_smoothing_m`` that of its corners' smoothing. ``dual``: the dual carriageways of the truth, each
-    ``(right, left, openings)`` lists of true edge ids (``right`` one-way forward along the chain, ``left`` back,
-    ``openings`` the median openings at the chain's nodes in chain order). ``detours``: the true edges of the
+    the range the drive's lane offset is drawn from, ``turn_smoothing_m`` that of its corners' smoothing. ``dual``:
+    the dual carriageways of the truth, each ``(right, left, openings)`` lists of true edge ids (``right`` one-way
+    forward along the chain, ``left`` back, ``openings`` the median openings at the chain's nodes in chain order). ``detours``: the true edges of the
     missing roads (the drive prefers them)."""
 
     truth: RoadGraph
