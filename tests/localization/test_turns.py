@@ -1,6 +1,7 @@
 """How the metric filter models a car turning: turn chains as long as a car drives them
-(``localization.metric.turn_path: arc``): a car cuts a corner on an arc, shorter than the map's path through the node,
-so a filter that moves it the map's length falls behind at every turn."""
+(``localization.metric.turn_path: arc``: a car cuts a corner on an arc, shorter than the map's path through the node,
+so a filter that moves it the map's length falls behind at every turn), and wide turns
+(``localization.metric.wide_zone_m``: a car that turns on a wider radius than the turn zone allows)."""
 
 from __future__ import annotations
 
