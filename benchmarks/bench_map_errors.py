@@ -28,6 +28,7 @@ import pandas as pd
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import dotted_overrides, load
 from topoloc.experiments.map_error_starts import localize_error, table
+from topoloc.odometry.map_errors import ERROR_TYPES
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -36,8 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--results", default="results/helsinki", help="pipeline results with graph/ and model/")
     parser.add_argument("--maps", default="region,dual_grid", help="base maps (experiments.map_errors.maps)")
-    parser.add_argument("--errors", default="none,lateral,displacement,simplified,dual_as_one,two_way_as_dual,"
-                                            "missing_road,extra_road,wide_turns")
+    parser.add_argument("--errors", default=",".join(["none", *ERROR_TYPES]))
     parser.add_argument("--levels", default="medium")
     parser.add_argument("--drives", type=int, default=0, help="random drives besides the three hard shapes")
     parser.add_argument("--start-every", type=float, default=150.0)
