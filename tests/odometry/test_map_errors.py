@@ -263,3 +263,14 @@ def test_walk_respects_one_way_and_prefers_detours(grid):
         for e, f in zip(route, froms):
             ow = pair.map.edges.oneway.iat[e]
             assert ow == 0 or (ow == 1 and pair.map.edges.u.iat[e] == f)
+
+
+def test_the_config_schema_lists_every_error_type():
+    import yaml
+
+    from topoloc.config import SCHEMA_PATH
+    from topoloc.odometry.map_errors import ERROR_TYPES
+
+    errors = yaml.safe_load(SCHEMA_PATH.read_text())["properties"]["experiments"]["properties"]["map_errors"][
+        "properties"]["errors"]
+    assert errors["items"]["enum"] == list(ERROR_TYPES) and errors["default"] == list(ERROR_TYPES)
