@@ -14,8 +14,10 @@ for a 120 m loop (a parking lot: 30 m out to the right, 60 m back, onto the road
 Prints one JSON line of figures: starts, resolved (by the oracle of the perturbed map; starts up to 200 m before
 the loop end are scored before it only), loc_share and median_ratio (of the resolved starts), cw (confident
 wrong: confidence >= 0.9 and wrong, of all answers; off the map every road is wrong), recov_* (from the return
-onto the map: localized again within 1.5x the oracle's distance from there, the median ratio, never), and the
-CPU seconds of the filter; then the recoveries of the start at frame 0 of each drive.
+onto the map: localized again within 1.5x the oracle's distance from there, the median ratio, never, and
+``recov_within_1.5_fresh``: within 1.5x the distance a filter started fresh at the return takes, the best a
+recovery can do on that map), and the CPU seconds of the filter; then the recoveries of the start at frame 0 of
+each drive (``fresh_m``: the fresh start's distance, inf where it never localizes).
 """
 
 from __future__ import annotations
@@ -129,8 +131,9 @@ def run(conf: dict, graph: RoadGraph, level: str, n_drives: int, seed: int, star
         odo = integrate_odometry(xy, yaw, OdometryNoise.from_dict(sim.noise), rng)
         driven = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
         starts = start_frames(driven, start_every)
+        extra = [] if rejoin is None or rejoin in set(starts.tolist()) else [rejoin]  # a fresh start at the return
         t0 = time.process_time()
-        runs = loc.run_starts(odo, road, lconf, starts)
+        runs = loc.run_starts(odo, road, lconf, np.sort(np.concatenate([starts, np.asarray(extra, starts.dtype)])))
         cpu += time.process_time() - t0
         on = edge >= 0
         # the oracle on the on-map part after the detour (or the whole drive)
@@ -144,7 +147,18 @@ def run(conf: dict, graph: RoadGraph, level: str, n_drives: int, seed: int, star
             elif rejoin is not None:
                 limits[s] = np.nan  # starts before the detour: scored on their stretch before it
         rej_oracle = oracle.count(path, 0, ev["confirm_m"]).localized_m if rejoin is not None else np.nan
+        fresh_m = np.nan
         for s, obs, track in runs:
+            if s == rejoin:
+                fr = np.asarray(obs.frame)
+                right = np.zeros(len(fr), bool)
+                m = on[fr]
+                right[m] = judge.right(np.asarray(track.state)[m], edge[fr][m], xy[fr][m])
+                step = localized_step(right, driven[fr] - driven[s], ev["confirm_m"])
+                fresh_m = driven[fr][step] - driven[s] if step is not None else np.inf
+        for s, obs, track in runs:
+            if s in extra:
+                continue
             fr = np.asarray(obs.frame)
             st = np.asarray(track.state)
             conf_ = np.asarray(track.confidence)
@@ -169,7 +183,7 @@ def run(conf: dict, graph: RoadGraph, level: str, n_drives: int, seed: int, star
                 if post.any() and s < rejoin - 400:
                     ps = localized_step(right[post], driven[fr[post]] - driven[rejoin], ev["confirm_m"])
                     recov.append({"drive": d, "start": s, "recover_m": driven[fr[post]][ps] - driven[rejoin] if ps is not None else np.nan,
-                                  "oracle_m": rej_oracle, "left_m": driven[-1] - driven[rejoin],
+                                  "oracle_m": rej_oracle, "fresh_m": fresh_m, "left_m": driven[-1] - driven[rejoin],
                                   "cw_after": int(cw[post].sum()), "steps_after": int(post.sum())})
             rows.append(row)
     return pd.DataFrame(rows), pd.DataFrame(recov), cpu
@@ -185,7 +199,9 @@ def summary(tab: pd.DataFrame, rec: pd.DataFrame, cpu: float) -> dict[str, float
         r = rec[np.isfinite(rec.oracle_m)]
         ratio = np.where(np.isfinite(r.recover_m), r.recover_m, np.inf) / r.oracle_m
         out.update({"recov_n": len(r), "recov_within_1.5": float(np.mean(ratio <= 1.5)), "recov_median_ratio": float(np.median(ratio)) if len(r) else np.nan,
-                    "recov_never": float(np.mean(~np.isfinite(r.recover_m))), "cw_after_detour": float(rec.cw_after.sum() / max(rec.steps_after.sum(), 1))})
+                    "recov_never": float(np.mean(~np.isfinite(r.recover_m))),
+                    "recov_within_1.5_fresh": float(np.mean(np.where(np.isfinite(r.recover_m), r.recover_m, np.inf)
+                                                            <= 1.5 * r.fresh_m)), "cw_after_detour": float(rec.cw_after.sum() / max(rec.steps_after.sum(), 1))})
     return out
 
 
