@@ -87,11 +87,29 @@ class CityFilter:
             self.fine.start(which)
             return
         self.fine.stop(which)
+        self.fine.evidence[which] = 0.0
         for b in which:
             self.fine.history[int(b)] = []
         self.coarse.start(which)
         self.in_coarse[which] = True
         self._coarse_answers = None
+
+    def stop(self, which: int | NDArray[np.int64]) -> None:
+        """Stop filters ``which`` (no entries, no steps; their history stays)."""
+        which = np.atleast_1d(np.asarray(which, np.int64))
+        self.fine.stop(which)
+        if self.coarse is not None:
+            self.coarse.stop(which)
+            self.in_coarse[which] = False
+            self._coarse_answers = None
+
+    def evidence(self) -> NDArray[np.float64]:
+        """Per filter, the log-likelihood of the yaws seen since its start (one term per step of the phase it is in)."""
+        return self.fine.evidence + (self.coarse.evidence if self.coarse is not None else 0.0)
+
+    def running(self) -> NDArray[np.bool_]:
+        """Per filter, whether it takes steps (in either phase)."""
+        return self.fine.running | (self.coarse.running if self.coarse is not None else False)
 
     def _to_fine(self, b: int) -> None:
         """Hand filter ``b``'s coarse belief to the fine filter (mass spread over the fine cells it covers)."""
@@ -171,6 +189,18 @@ class CityFilter:
     def answer(self, which: int = 0) -> Estimate:
         """The answer of filter ``which``."""
         return self.answers()[which]
+
+    def roads(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+        """Per filter, the road of largest probability, that probability and the off-map probability (cheaper than
+        :meth:`answers`: no cells)."""
+        edge, confidence = self.fine.roads()
+        offmap = self.fine.offmap.copy()
+        if self.coarse is not None and self.in_coarse.any():
+            coarse_edge, coarse_confidence = self.coarse.roads()
+            edge = np.where(self.in_coarse, coarse_edge, edge)
+            confidence = np.where(self.in_coarse, coarse_confidence, confidence)
+            offmap = np.where(self.in_coarse, self.coarse.offmap, offmap)
+        return edge, confidence, offmap
 
     def places(self, k: int, merge_m: float = 0.0) -> list[list[Place]]:
         """Per filter, its ``k`` most probable places (of the coarse belief while in the coarse phase)."""

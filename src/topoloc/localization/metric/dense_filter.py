@@ -76,6 +76,7 @@ class MetricFilter:
         self.mean = np.zeros(0, COMPLEX)
         self.ahead = np.zeros(groups)  # cells a group has moved ahead of its whole moves
         self.offmap = np.zeros(self.filters)
+        self.evidence = np.zeros(self.filters)  # log-likelihood of the yaws seen since the start, per filter
         self.last_yaw = np.full(self.filters, np.nan)  # the odometry's yaw at the previous step, per filter
         self.running = np.zeros(self.filters, bool)
         self.split = np.zeros(self.filters, bool)
@@ -146,6 +147,7 @@ class MetricFilter:
                   np.concatenate([self.kappa[keep], np.zeros(len(fresh), REAL)]),
                   np.concatenate([self.mean[keep], np.ones(len(fresh), COMPLEX)]))
         self.offmap[which] = self.settings.offmap_prior
+        self.evidence[which] = 0.0
         self.last_yaw[which] = np.nan
         self.running[which] = True
         self.split[which] = False
@@ -295,6 +297,7 @@ class MetricFilter:
         on_map = np.bincount(filt, weights=weight, minlength=self.filters)
         total = on_map + offmap
         total = np.where(total > 0, total, 1.0)
+        self.evidence += np.where(self.running, np.log(total), 0.0)
         self.weight = weight / total[filt].astype(REAL)
         self.offmap = offmap / total
         keep = self.weight >= (self.prune * self._filter_max(self.weight))[filt].astype(REAL)
@@ -326,6 +329,12 @@ class MetricFilter:
         filt = self.group // self.classes
         flat = np.bincount(filt * roads + self.grid.edge[self.cell], weights=self.weight, minlength=self.filters * roads)
         return flat.reshape(self.filters, roads)
+
+    def roads(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """Per filter, the road of largest probability and that probability (:meth:`answers` without the cells)."""
+        marginal = self.edge_marginals()
+        edge = np.argmax(marginal, axis=1)
+        return edge, marginal[np.arange(self.filters), edge]
 
     def answers(self) -> list[Estimate]:
         """Per filter: the road of largest probability, its most probable cell, and that probability."""
