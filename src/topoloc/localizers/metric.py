@@ -12,6 +12,7 @@ from topoloc.localization.connectivity import DirectedEdges, directed_edges
 from topoloc.localization.metric.city_filter import CityFilter, coarse_settings, uses_coarse
 from topoloc.localization.metric.map_model import MetricModel, MetricSettings
 from topoloc.localization.metric.odometry_steps import odometry_steps
+from topoloc.localization.metric.restart import RestartingFilter
 from topoloc.localization.roadmap import Observations, RoadLocalizer, RoadMap
 from topoloc.localizer import Answer, Track, register
 from topoloc.motion.poses import Odometry
@@ -35,13 +36,24 @@ class MetricLocalizer(RoadLocalizer):
         settings = MetricSettings.from_conf(conf["localization"]["metric"])
         states = metric_states(map, settings)
         lane = map.lane_offsets(self.lane)
-        model = map.cached(("metric", settings, self.lane), lambda: MetricModel(map.graph, states, settings, lane))
+        self.model = model = map.cached(("metric", settings, self.lane), lambda: MetricModel(map.graph, states, settings, lane))
         coarse = None
         if uses_coarse(settings, model.num_cells):  # a city map: coarse cells while the belief is broad
             wide = coarse_settings(settings)
             coarse = map.cached(("metric", wide, self.lane), lambda: MetricModel(map.graph, states, wide, lane))
         self.coarse_model = coarse
-        self.filter = CityFilter(model, coarse)
+        self.restart = bool(conf["localization"]["metric"]["restart"])
+        self.restart_confidence = float(conf["localization"]["metric"]["restart_confidence"])
+        self.restart_margin = float(conf["localization"]["metric"]["restart_margin"])
+        self.restart_hold_m = float(conf["localization"]["metric"]["restart_hold_m"])
+        self.filter = self._bank(1)
+
+    def _bank(self, filters: int) -> CityFilter | RestartingFilter:
+        """Filters for ``filters`` starts on this map (with challengers where ``restart`` is on)."""
+        if self.restart:
+            return RestartingFilter(self.model, self.coarse_model, filters, self.restart_confidence, self.restart_margin,
+                                    self.restart_hold_m)
+        return CityFilter(self.model, self.coarse_model, filters)
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
         steps = odometry_steps(odometry.xy, odometry.yaw, float(conf["localization"]["metric"]["cell_m"]))
@@ -69,7 +81,7 @@ class MetricLocalizer(RoadLocalizer):
         first = np.searchsorted(steps.frame, starts, side="right")  # the first step that ends after the start
         keep = first < len(steps)
         starts, first = starts[keep], first[keep]
-        bank = CityFilter(self.filter.model, self.coarse_model, filters=len(starts))
+        bank = self._bank(len(starts))
         answers: list[list[Answer]] = [[] for _ in starts]
         for j in range(len(steps)):
             fresh = np.flatnonzero(first == j)

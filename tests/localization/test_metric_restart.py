@@ -1,0 +1,77 @@
+"""The metric filter's restart (``localization.metric.restart``): a filter that has lost the track it held races a
+fresh one started after the loss. Where the plain filter finds the track again on its own, the answers are the
+plain filter's; after a stretch off a map with errors, where the plain filter is lost for good or stays lost for
+long, the restarted filter finds the track again, and sooner."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from localization_helpers import irregular_grid
+from test_metric_recovery import conf_slices
+
+from topoloc.localization.evaluation import Judge, localized_step
+from topoloc.localization.roadmap import RoadMap
+from topoloc.motion.noise import OdometryNoise, integrate_odometry
+from topoloc.odometry.map_error_drives import off_map_loop
+from topoloc.odometry.map_errors import make_map_pair
+from topoloc.odometry.simulate import NOISE_LEVELS, simulate_pattern_drive
+from topoloc.registry import make
+
+
+def loop_drive(seed: int, error: str):
+    """A 2.4 km drive on the irregular grid that leaves the road for a 120 m loop at 40 %, the map the localizer sees
+    (``error`` at the medium level, or the truth), the odometry, positions, true roads, metres driven, the return."""
+    graph, _ = irregular_grid()
+    rng = np.random.default_rng(seed)
+    seen = make_map_pair(graph, error, "medium", rng).map if error != "none" else graph
+    sim = simulate_pattern_drive(graph, 2400.0, NOISE_LEVELS["medium"], rng)
+    xy, yaw, edge, back = off_map_loop(sim.gt_xy, sim.gt_yaw, sim.edge, 0.4 * sim.length_m)
+    odometry = integrate_odometry(xy, yaw, OdometryNoise.from_dict(sim.noise), rng)
+    driven = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+    return seen, odometry, xy, edge, driven, back
+
+
+def localize(seen, odometry, **metric):
+    """The metric filter's track, its observation frames, and the localizer."""
+    road, conf = RoadMap(seen), conf_slices(**metric)
+    localizer = make("metric")
+    observations = localizer.observe(odometry, road, conf)
+    localizer.reset(road, conf)
+    return localizer.run(observations.items), observations.frame, localizer
+
+
+def found_after(seen, track, frame, xy, edge, driven, back) -> tuple[float, float]:
+    """Metres from the return onto the map until localized again (inf: never), and the share of sure wrong answers
+    after the return."""
+    after = frame >= back
+    right = Judge(seen, 5.0).right(track.state[after], edge[frame[after]], xy[frame[after]])
+    step = localized_step(right, driven[frame[after]] - driven[back], 200.0)
+    found = driven[frame[after]][step] - driven[back] if step is not None else np.inf
+    return found, float(np.mean((track.confidence[after] >= 0.9) & ~right))
+
+
+@pytest.mark.parametrize("seed", [4, 7])
+def test_a_track_found_again_keeps_the_plain_filters_answers(seed):
+    # on the true map the plain filter finds the track again after the loop: the restart changes no answer
+    seen, odometry, *_ = loop_drive(seed, "none")
+    plain, _, _ = localize(seen, odometry)
+    restarted, _, localizer = localize(seen, odometry, restart=True)
+    assert np.array_equal(plain.state, restarted.state) and np.array_equal(plain.path, restarted.path)
+    np.testing.assert_array_equal(plain.confidence, restarted.confidence)
+
+
+@pytest.mark.parametrize("seed", [6, 13])
+def test_a_lost_track_is_found_again_sooner(seed):
+    # nodes and curves displaced (medium): after the loop the plain filter stays lost for over a kilometre (seed 6:
+    # to the end of the drive); the restarted one swaps to its challenger and is right again in half that or less,
+    # never sure of a wrong road after the return
+    seen, odometry, xy, edge, driven, back = loop_drive(seed, "displacement")
+    plain, frame, _ = localize(seen, odometry)
+    plain_m, _ = found_after(seen, plain, frame, xy, edge, driven, back)
+    restarted, frame, localizer = localize(seen, odometry, restart=True)
+    restarted_m, sure_wrong = found_after(seen, restarted, frame, xy, edge, driven, back)
+    assert plain_m >= 1000.0 and np.isfinite(restarted_m) and restarted_m <= 0.5 * plain_m, (plain_m, restarted_m)
+    assert sure_wrong <= 0.01
+    assert localizer.filter.swaps[0] == 1 and len(restarted.path) == len(restarted.state)
+    assert (restarted.path[-50:] >= 0).all()
