@@ -52,7 +52,9 @@ The modules of this package:
 * :mod:`~topoloc.localization.metric.von_mises`: the heading-offset belief's circular statistics;
 * :mod:`~topoloc.localization.metric.dense_filter`: the belief over every cell, for one or many starts;
 * :mod:`~topoloc.localization.metric.city_filter`: the city-scale variant (coarse cells while the belief is
-  broad).
+  broad);
+* :mod:`~topoloc.localization.metric.restart`: filters that race a fresh one after losing their track
+  (``restart``, off by default).
 
 Every filter follows :class:`topoloc.localizer.Filter`; the registered localizer ``metric`` is the adapter
 :mod:`topoloc.localizers.metric`.
