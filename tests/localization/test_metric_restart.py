@@ -75,3 +75,26 @@ def test_a_lost_track_is_found_again_sooner(seed):
     assert sure_wrong <= 0.01
     assert localizer.filter.swaps[0] == 1 and len(restarted.path) == len(restarted.state)
     assert (restarted.path[-50:] >= 0).all()
+
+
+def test_a_start_in_a_bank_is_answered_as_alone():
+    # run_starts (every start of a drive in one bank, as the evaluation runs them) gives the drive's first start the
+    # answers and the path of the same filter run alone, swap included; the belief and the road marginals are the
+    # main filter's
+    seen, odometry, *_ = loop_drive(13, "displacement")
+    alone, frame, localizer = localize(seen, odometry, restart=True)
+    road, conf = RoadMap(seen), conf_slices(restart=True)
+    runs = localizer.run_starts(odometry, road, conf, np.array([0, int(frame[len(frame) // 2])]))
+    _, observations, track = runs[0]
+    assert np.array_equal(observations.frame, frame)
+    assert np.array_equal(track.state, alone.state) and np.array_equal(track.path, alone.path)
+    np.testing.assert_array_equal(track.confidence, alone.confidence)
+    localizer = make("metric")
+    localizer.reset(road, conf)
+    localizer.start()
+    for item in localizer.observe(odometry, road, conf).items:
+        answer = localizer.update(item)
+    marginals = localizer.filter.road_marginals(0)
+    _, weight, offmap = localizer.filter.belief(0)
+    assert localizer.filter.swaps[0] == 1 and marginals.argmax() == answer.state
+    assert weight.sum() + offmap == pytest.approx(1.0, abs=1e-3)

@@ -63,9 +63,8 @@ def live_run(localizer: MetricLocalizer, road: RoadMap, conf: dict[str, Any], od
         if wanted and (steps_driven[j] >= wanted[0] or j == len(observations.items) - 1):
             wanted.pop(0)
             frame = int(observations.frame[j])
-            bank = localizer.filter.coarse if localizer.filter.in_coarse[0] else localizer.filter.fine
             cell_xy, weight, _ = localizer.filter.belief(0)
-            snaps.append(BeliefSnapshot(float(steps_driven[j]), bank.edge_marginals()[0], int(truth.edge[frame]),
+            snaps.append(BeliefSnapshot(float(steps_driven[j]), localizer.filter.road_marginals(0), int(truth.edge[frame]),
                                         truth.xy[frame], truth.xy[:frame + 1], near_mass(cell_xy, weight, truth.xy[frame])))
     cpu, confidence = np.asarray(cpu), np.asarray(confidence)
     first = int(np.argmax(confidence >= sure)) if (confidence >= sure).any() else len(cpu)

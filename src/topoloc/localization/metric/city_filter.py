@@ -190,6 +190,11 @@ class CityFilter:
         """The answer of filter ``which``."""
         return self.answers()[which]
 
+    def road_marginals(self, which: int = 0) -> NDArray[np.float64]:
+        """Filter ``which``'s probability of each undirected road (of the coarse belief while in the coarse phase)."""
+        bank = self.coarse if self.coarse is not None and self.in_coarse[which] else self.fine
+        return bank.edge_marginals()[which]
+
     def roads(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
         """Per filter, the road of largest probability, that probability and the off-map probability (cheaper than
         :meth:`answers`: no cells)."""

@@ -56,7 +56,7 @@ class RestartingFilter:
         self.restarts = np.zeros(self.filters, np.int64)  # challengers started, per main filter
         self.swaps = np.zeros(self.filters, np.int64)  # challengers that took over, per main filter
         self._answers: list[Estimate] | None = None
-        self.steps = 0
+        self.age = np.zeros(self.filters, np.int64)  # steps since each main filter's start
 
     @property
     def num_cells(self) -> int:
@@ -69,6 +69,7 @@ class RestartingFilter:
         self.bank.start(self.slot[which])
         self.had_track[which] = False
         self.racing[which] = False
+        self.age[which] = 0
         for b in which:
             self.prefix[int(b)] = []
         self._answers = None
@@ -78,15 +79,16 @@ class RestartingFilter:
         self.bank.update(direction, yaw)
         self._answers = None
         running = self.bank.running()[self.slot]
-        self.steps += 1
-        track_check = self.steps % TRACK_CHECK_STEPS == 0 and (running & ~self.had_track).any()
-        if not track_check and not (running & self.racing).any() and not self._any_lost(running):
+        self.age[running] += 1
+        # each filter's own step count, so that a filter in a bank of many starts is answered as if alone
+        check = running & ~self.had_track & (self.age % TRACK_CHECK_STEPS == 0)
+        if not check.any() and not (running & self.racing).any() and not self._any_lost(running):
             return
         edge, confidence, offmap = self.bank.roads()
         evidence = self.bank.evidence()
         for b in np.flatnonzero(running):
             main, rival = int(self.slot[b]), int(self.spare[b])
-            if confidence[main] >= self.confidence:
+            if check[b] and confidence[main] >= self.confidence:
                 self.had_track[b] = True
             if not self.racing[b]:
                 if self.had_track[b] and offmap[main] >= LOST_OFFMAP:
@@ -151,6 +153,10 @@ class RestartingFilter:
     def path(self, which: int = 0) -> NDArray[np.int64]:
         """Main filter ``which``'s path traced back (fine cells, -1 where unknown), across its swaps."""
         return np.concatenate(self.prefix[which] + [self.bank.path(int(self.slot[which]))])
+
+    def road_marginals(self, which: int = 0) -> NDArray[np.float64]:
+        """Main filter ``which``'s probability of each undirected road."""
+        return self.bank.road_marginals(int(self.slot[which]))
 
     def belief(self, which: int = 0) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
         """Main filter ``which``'s belief: map positions of its cells, their probabilities, the off-map probability."""
