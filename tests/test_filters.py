@@ -90,6 +90,7 @@ def _ranked_filters():
     from topoloc.localization.metric.city_filter import CityFilter
     from topoloc.localization.metric.dense_filter import MetricFilter
     from topoloc.localization.metric.map_model import MetricModel, MetricSettings
+    from topoloc.localization.metric.restart import RestartingFilter
     from topoloc.localization.roadmap import RoadMap
 
     graph, _ = irregular_grid()
@@ -98,8 +99,8 @@ def _ranked_filters():
     model = MetricModel(graph, road.states, MetricSettings.from_conf(conf["metric"]))
     yaws = np.radians(np.r_[np.zeros(60), np.full(40, 90.0)])  # 120 m east, then 80 m north, in 2 m steps
     built = {}
-    for cls in (MetricFilter, CityFilter):
-        filt = cls(model, None) if cls is CityFilter else cls(model)
+    for cls in (MetricFilter, CityFilter, RestartingFilter):
+        filt = cls(model) if cls is MetricFilter else cls(model, None)
         filt.start()
         for yaw in yaws:
             filt.update(1, float(yaw))
