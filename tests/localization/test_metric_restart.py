@@ -1,7 +1,7 @@
 """The metric filter's restart (``localization.metric.restart``): a filter that has lost the track it held races a
-fresh one started after the loss. Where the plain filter finds the track again on its own, the answers are the
-plain filter's; after a stretch off a map with errors, where the plain filter is lost for good or stays lost for
-long, the restarted filter finds the track again, and sooner."""
+fresh one started after the loss. Until a challenger takes over, the answers are the plain filter's; after a stretch
+off a map with errors, where the plain filter is lost for good or stays lost for long, the restarted filter finds
+the track again, and sooner."""
 
 from __future__ import annotations
 
@@ -21,10 +21,10 @@ from topoloc.registry import make
 
 def loop_drive(seed: int, error: str):
     """A 2.4 km drive on the irregular grid that leaves the road for a 120 m loop at 40 %, the map the localizer sees
-    (``error`` at the medium level, or the truth), the odometry, positions, true roads, metres driven, the return."""
+    (``error`` at the medium level), the odometry, positions, true roads, metres driven, the return."""
     graph, _ = irregular_grid()
     rng = np.random.default_rng(seed)
-    seen = make_map_pair(graph, error, "medium", rng).map if error != "none" else graph
+    seen = make_map_pair(graph, error, "medium", rng).map
     sim = simulate_pattern_drive(graph, 2400.0, NOISE_LEVELS["medium"], rng)
     xy, yaw, edge, back = off_map_loop(sim.gt_xy, sim.gt_yaw, sim.edge, 0.4 * sim.length_m)
     odometry = integrate_odometry(xy, yaw, OdometryNoise.from_dict(sim.noise), rng)
@@ -51,12 +51,14 @@ def found_after(seen, track, frame, xy, edge, driven, back) -> tuple[float, floa
     return found, float(np.mean((track.confidence[after] >= 0.9) & ~right))
 
 
-@pytest.mark.parametrize("seed", [4, 7])
-def test_a_track_found_again_keeps_the_plain_filters_answers(seed):
-    # on the true map the plain filter finds the track again after the loop: the restart changes no answer
-    seen, odometry, *_ = loop_drive(seed, "none")
+@pytest.mark.parametrize("seed", [1, 9])
+def test_a_race_without_a_takeover_keeps_the_plain_filters_answers(seed):
+    # nodes and curves displaced (medium): the filter falls off the map at the loop and challengers race it (twice),
+    # but none takes over; until one does, every answer and the path are the plain filter's
+    seen, odometry, *_ = loop_drive(seed, "displacement")
     plain, _, _ = localize(seen, odometry)
     restarted, _, localizer = localize(seen, odometry, restart=True)
+    assert localizer.filter.restarts[0] >= 1 and localizer.filter.swaps[0] == 0
     assert np.array_equal(plain.state, restarted.state) and np.array_equal(plain.path, restarted.path)
     np.testing.assert_array_equal(plain.confidence, restarted.confidence)
 
