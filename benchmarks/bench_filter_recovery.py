@@ -147,26 +147,21 @@ def run(conf: dict, graph: RoadGraph, level: str, n_drives: int, seed: int, star
             elif rejoin is not None:
                 limits[s] = np.nan  # starts before the detour: scored on their stretch before it
         rej_oracle = oracle.count(path, 0, ev["confirm_m"]).localized_m if rejoin is not None else np.nan
-        fresh_m = np.nan
+        fresh_m, first_recovery = np.nan, len(recov)
         for s, obs, track in runs:
-            if s == rejoin:
-                fr = np.asarray(obs.frame)
-                right = np.zeros(len(fr), bool)
-                m = on[fr]
-                right[m] = judge.right(np.asarray(track.state)[m], edge[fr][m], xy[fr][m])
-                step = localized_step(right, driven[fr] - driven[s], ev["confirm_m"])
-                fresh_m = driven[fr][step] - driven[s] if step is not None else np.inf
-        for s, obs, track in runs:
-            if s in extra:
-                continue
             fr = np.asarray(obs.frame)
             st = np.asarray(track.state)
             conf_ = np.asarray(track.confidence)
             right = np.zeros(len(fr), bool)
             m = on[fr]
             right[m] = judge.right(st[m], edge[fr][m], xy[fr][m])
-            cw = ~right & (conf_ >= ev["sure"])
             dist = driven[fr] - driven[s]
+            if s == rejoin:  # the fresh start at the return
+                step = localized_step(right, dist, ev["confirm_m"])
+                fresh_m = dist[step] if step is not None else np.inf
+            if s in extra:
+                continue
+            cw = ~right & (conf_ >= ev["sure"])
             row = {"drive": d, "start": s, "steps": len(fr), "cw": cw.sum(), "cw_off": (cw & ~m).sum()}
             if rejoin is not None and s >= rejoin - 200 and s < rejoin:
                 continue
@@ -183,9 +178,11 @@ def run(conf: dict, graph: RoadGraph, level: str, n_drives: int, seed: int, star
                 if post.any() and s < rejoin - 400:
                     ps = localized_step(right[post], driven[fr[post]] - driven[rejoin], ev["confirm_m"])
                     recov.append({"drive": d, "start": s, "recover_m": driven[fr[post]][ps] - driven[rejoin] if ps is not None else np.nan,
-                                  "oracle_m": rej_oracle, "fresh_m": fresh_m, "left_m": driven[-1] - driven[rejoin],
+                                  "oracle_m": rej_oracle, "left_m": driven[-1] - driven[rejoin],
                                   "cw_after": int(cw[post].sum()), "steps_after": int(post.sum())})
             rows.append(row)
+        for r in recov[first_recovery:]:  # the fresh start at the return comes after the starts that recover
+            r["fresh_m"] = fresh_m
     return pd.DataFrame(rows), pd.DataFrame(recov), cpu
 
 
