@@ -20,28 +20,31 @@ CANDIDATES = 4
 
 
 def belief_places(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDArray, cell_edge: NDArray[np.int64],
-                  cell_xy: NDArray[np.float64], filters: int, roads: int, k: int, merge_m: float = 0.0) -> list[list[Place]]:
-    """Per filter of ``filters``, its top ``k`` places, from the belief's entries: the filter that ``owner``\\ s
-    each entry, its ``cell`` and ``weight`` (entries of one cell may repeat: they add up); ``cell_edge`` and
-    ``cell_xy`` give each cell's road and position on a map of ``roads`` roads."""
+                  cell_xy: NDArray[np.float64], filters: int, roads: int, k: int, merge_m: float = 0.0,
+                  which: NDArray[np.int64] | None = None) -> list[list[Place]]:
+    """Per filter of ``filters`` (or of those in ``which``, in its order), its top ``k`` places, from the belief's
+    entries: the filter that ``owner``\\ s each entry, its ``cell`` and ``weight`` (entries of one cell may repeat:
+    they add up); ``cell_edge`` and ``cell_xy`` give each cell's road and position on a map of ``roads`` roads."""
     owner, cell = np.asarray(owner, np.int64), np.asarray(cell, np.int64)
     weight = np.asarray(weight)
     key = owner * roads + cell_edge[cell]
     marginal = np.bincount(key, weights=weight, minlength=filters * roads).reshape(filters, roads)
+    rows = np.arange(filters) if which is None else np.asarray(which, np.int64)
+    marginal = marginal[rows]
     m = min(roads, CANDIDATES * max(1, int(k)))
-    top = np.argpartition(-marginal, m - 1, axis=1)[:, :m] if m < roads else np.tile(np.arange(roads), (filters, 1))
+    top = np.argpartition(-marginal, m - 1, axis=1)[:, :m] if m < roads else np.tile(np.arange(roads), (len(rows), 1))
     prob = np.take_along_axis(marginal, top, axis=1)
     order = np.argsort(-prob, axis=1, kind="stable")  # most probable first
     top, prob = np.take_along_axis(top, order, axis=1), np.take_along_axis(prob, order, axis=1)
     wanted = np.zeros(filters * roads, bool)
-    wanted[(np.arange(filters)[:, None] * roads + top).ravel()] = True
+    wanted[(rows[:, None] * roads + top).ravel()] = True
     mine = np.flatnonzero(wanted[key] & (weight > 0))
     best = np.zeros(filters * roads, weight.dtype)  # per (filter, road): the largest entry, and its cell
     np.maximum.at(best, key[mine], weight[mine])
     hit = mine[weight[mine] == best[key[mine]]][::-1]  # written last to first: the first entry of a tie wins
     best_cell = np.zeros(filters * roads, np.int64)
     best_cell[key[hit]] = cell[hit]
-    xy = cell_xy[best_cell[np.arange(filters)[:, None] * roads + top]]
+    xy = cell_xy[best_cell[rows[:, None] * roads + top]]
     xy = np.where((prob > 0)[..., None], xy, np.nan)
     states, probs, xs, ys = top.tolist(), prob.tolist(), xy[..., 0].tolist(), xy[..., 1].tolist()
-    return [merge_sorted(states[b], probs[b], xs[b], ys[b], k, merge_m) for b in range(filters)]
+    return [merge_sorted(states[b], probs[b], xs[b], ys[b], k, merge_m) for b in range(len(rows))]

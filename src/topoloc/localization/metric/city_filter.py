@@ -207,13 +207,15 @@ class CityFilter:
             offmap = np.where(self.in_coarse, self.coarse.offmap, offmap)
         return edge, confidence, offmap
 
-    def places(self, k: int, merge_m: float = 0.0) -> list[list[Place]]:
-        """Per filter, its ``k`` most probable places (of the coarse belief while in the coarse phase)."""
-        out = self.fine.places(k, merge_m)
-        if self.coarse is not None and self.in_coarse.any():
-            coarse = self.coarse.places(k, merge_m)
-            for b in np.flatnonzero(self.in_coarse):
-                out[b] = coarse[b]
+    def places(self, k: int, merge_m: float = 0.0, which: NDArray[np.int64] | None = None) -> list[list[Place]]:
+        """Per filter (or per filter in ``which``), its ``k`` most probable places (of the coarse belief while in the
+        coarse phase)."""
+        which = np.arange(self.fine.filters) if which is None else np.asarray(which, np.int64)
+        out = self.fine.places(k, merge_m, which)
+        coarse = np.flatnonzero(self.in_coarse[which]) if self.coarse is not None else np.zeros(0, np.int64)
+        if len(coarse):
+            for i, places in zip(coarse, self.coarse.places(k, merge_m, which[coarse])):
+                out[i] = places
         return out
 
     def top_places(self, k: int, merge_m: float = 0.0, which: int = 0) -> list[Place]:

@@ -358,10 +358,11 @@ class MetricFilter:
         """The answer of filter ``which``."""
         return self.answers()[which]
 
-    def places(self, k: int, merge_m: float = 0.0) -> list[list[Place]]:
-        """Per filter, its ``k`` most probable places (:func:`topoloc.localization.places.belief_places`)."""
+    def places(self, k: int, merge_m: float = 0.0, which: NDArray[np.int64] | None = None) -> list[list[Place]]:
+        """Per filter (or per filter in ``which``), its ``k`` most probable places
+        (:func:`topoloc.localization.places.belief_places`)."""
         return belief_places(self.group // self.classes, self.cell, self.weight, self.grid.edge, self.grid.xy,
-                             self.filters, self.grid.states.num_edges, k, merge_m)
+                             self.filters, self.grid.states.num_edges, k, merge_m, which)
 
     def top_places(self, k: int, merge_m: float = 0.0, which: int = 0) -> list[Place]:
         """The ``k`` most probable places of filter ``which`` (:class:`topoloc.localizer.RankedFilter`)."""

@@ -143,8 +143,7 @@ class RestartingFilter:
 
     def places(self, k: int, merge_m: float = 0.0) -> list[list[Place]]:
         """Per main filter, its ``k`` most probable places."""
-        places = self.bank.places(k, merge_m)
-        return [places[int(s)] for s in self.slot]
+        return self.bank.places(k, merge_m, self.slot)
 
     def top_places(self, k: int, merge_m: float = 0.0, which: int = 0) -> list[Place]:
         """The ``k`` most probable places of main filter ``which``."""

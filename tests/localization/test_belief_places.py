@@ -1,0 +1,41 @@
+"""The top places of a bank's beliefs (``topoloc.localization.places.belief_places``), for all filters or some."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from topoloc.localization.places import belief_places
+
+
+def bank(seed: int) -> dict:
+    """Three filters' entries over 8 cells of 4 roads, cells of one road repeating."""
+    rng = np.random.default_rng(seed)
+    owner = rng.integers(0, 3, 60)
+    cell = rng.integers(0, 8, 60)
+    weight = rng.random(60)
+    for f in range(3):
+        weight[owner == f] /= weight[owner == f].sum()
+    edge = np.array([0, 0, 1, 1, 2, 2, 3, 3])
+    xy = np.column_stack([np.arange(8.0), np.zeros(8)])
+    return dict(owner=owner, cell=cell, weight=weight, cell_edge=edge, cell_xy=xy, filters=3, roads=4, k=2)
+
+
+def test_places_of_some_filters_are_theirs_among_all():
+    for seed in range(5):
+        args = bank(seed)
+        every = belief_places(**args)
+        assert len(every) == 3
+        for which in ([2, 0], [1], [0, 1, 2]):
+            assert belief_places(**args, which=np.array(which)) == [every[f] for f in which]
+
+
+def test_a_place_is_a_roads_mass_at_its_largest_entry():
+    args = bank(3)
+    owner, cell, weight, edge = args["owner"], args["cell"], args["weight"], args["cell_edge"]
+    for f, places in enumerate(belief_places(**args)):
+        mass = np.bincount(edge[cell[owner == f]], weights=weight[owner == f], minlength=4)
+        assert [p.state for p in places] == list(np.argsort(-mass, kind="stable")[:2])
+        for p in places:
+            assert np.isclose(p.probability, mass[p.state])
+            on_road = np.flatnonzero((owner == f) & (edge[cell] == p.state))
+            assert p.xy[0] == cell[on_road[np.argmax(weight[on_road])]]  # cell k lies at x = k
