@@ -225,18 +225,27 @@ class CellGrid:
         return len(self.chain)
 
     @cached_property
+    def u_turn_chain(self) -> NDArray[np.bool_]:
+        """Per chain, whether it is a U-turn (a turn of 180 deg either way through its node)."""
+        return np.abs(self.chains.turn) > np.pi - 1e-6
+
+    @cached_property
     def to_node(self) -> NDArray[np.float64]:
         """Metres from each cell centre to the nearer end of its directed edge."""
         return np.minimum(self.state_offset, self.states.length[self.state] - self.state_offset)
 
     def moves(self, distance_m: float, split: bool = True) -> Moves:
         """Where a drive of ``distance_m`` (> 0) from every cell centre lands (see the module docstring); at a
-        chain's end the weight is split among the chains that follow (``split``), or each keeps it whole."""
+        chain's end the weight is split among the chains that follow (``split``), or each keeps it whole. A move
+        takes at most one U-turn (but where a dead end leaves no other way): on roads shorter than a step, U-turn
+        after U-turn would bounce between two nodes, each bounce branching, without driving any distance."""
         ch = self.chains
         src = np.arange(self.num_cells)
         c = self.chain.copy()
         q = self.offset + float(distance_m)
         w = np.ones(self.num_cells)
+        is_u = self.u_turn_chain
+        turned = is_u[c]
         out: list[tuple[NDArray, NDArray, NDArray]] = []
         for _ in range(MAX_HOPS):  # hops across chains; stops when every move has landed
             inside = q < ch.length[c]
@@ -245,11 +254,17 @@ class CellGrid:
             leave = ~inside
             if not leave.any():
                 break
-            src, c, q, w = src[leave], c[leave], q[leave] - ch.length[c[leave]], w[leave]
+            src, c, q, w, turned = src[leave], c[leave], q[leave] - ch.length[c[leave]], w[leave], turned[leave]
             counts = ch.next_ptr[c + 1] - ch.next_ptr[c]
             rep = np.repeat(np.arange(len(c)), counts)
             offset = np.arange(len(rep)) - np.repeat(np.cumsum(counts) - counts, counts)
             nxt = ch.next_idx[ch.next_ptr[c][rep] + offset]
+            barred = turned[rep] & is_u[nxt]
+            if barred.any():  # a second U-turn in one move, unless it is the only way on
+                other = np.bincount(rep, weights=~barred, minlength=len(c)) > 0
+                keep = ~barred | ~other[rep]
+                rep, nxt = rep[keep], nxt[keep]
+                counts = np.bincount(rep, minlength=len(c))
             if ch.weight is None:
                 w = w[rep] / counts[rep] if split else w[rep]
             elif split:  # shares by weight
@@ -260,7 +275,7 @@ class CellGrid:
                 top = np.zeros(len(c))
                 np.maximum.at(top, rep, way[nxt])
                 w = w[rep] * ch.weight[nxt] / top[rep]
-            src, q, c = src[rep], q[rep], nxt
+            src, q, c, turned = src[rep], q[rep], nxt, turned[rep] | is_u[nxt]
         if not out:
             empty = np.zeros(0, np.int64)
             return Moves(empty, empty, np.zeros(0))
