@@ -154,3 +154,26 @@ def test_the_filter_follows_a_car_that_turns_widely():
             assert np.median(error) <= 1.5, np.median(error)
     # turns within 8 m of the node cannot explain these; wide turns can (no sure answer against 69 % when written)
     assert sure[0.0].mean() <= 0.05 and sure[20.0].mean() >= 0.5, (sure[0.0].mean(), sure[20.0].mean())
+
+
+def test_a_move_across_roads_shorter_than_a_step_takes_one_u_turn(monkeypatch):
+    """OSM junctions hold roads of centimetres; with U-turns at every node a move could bounce U-turn after U-turn
+    between their nodes without driving on, each bounce branching (a city map's coarse model ran out of memory)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "trajectory"))
+    from trajectory_helpers import make_graph
+
+    from topoloc.localization.metric import cell_grid
+
+    coords = {0: (0.0, 0.0), 1: (60.0, 0.0), 2: (60.05, 0.0), 3: (60.10, 0.0), 4: (60.15, 0.0), 5: (120.0, 0.0)}
+    graph = make_graph(coords, [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5)])
+    states = directed_edges(graph, "always")
+    grid = CellGrid(graph, states, lane_chains(graph, states, 8.0, 12.0, u_turn_weight=0.02), 2.0, 12.0)
+    assert grid.u_turn_chain.sum() == 2 * 10  # a U-turn at the end of each of the 10 directed roads, two sweeps each
+    monkeypatch.setattr(cell_grid, "MAX_HOPS", 12)  # a move that has not landed by then is lost
+    for distance in (2.0, 8.0):
+        moves = grid.moves(distance)
+        np.testing.assert_allclose(np.bincount(moves.src, weights=moves.weight, minlength=grid.num_cells), 1.0)
+        assert len(moves.src) < 20 * grid.num_cells
