@@ -75,7 +75,7 @@ def test_a_mirror_walk_does_not_end_sure():
     localizer.reset(road, conf)
     track = localizer.run(observations.items)
     assert (track.confidence < 0.9).all()
-    marginal = localizer.filter.fine.edge_marginals()[0]
+    marginal = localizer.filter.road_marginals(0)
     true_edge = int(edge[observations.frame[-1]])
     mirror = int(np.argsort(marginal)[-2] if np.argmax(marginal) == true_edge else np.argmax(marginal))
     assert marginal[true_edge] >= 0.3 and marginal[mirror] >= 0.3  # both places hold the belief

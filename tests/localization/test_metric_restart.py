@@ -1,7 +1,7 @@
-"""The metric filter's restart (``localization.metric.restart``): a filter that has lost the track it held races a
-fresh one started after the loss. Until a challenger takes over, the answers are the plain filter's; after a stretch
-off a map with errors, where the plain filter is lost for good or stays lost for long, the restarted filter finds
-the track again, and sooner."""
+"""The metric filter's restart (``localization.metric.restart``, on by default): a filter that has lost the track
+it held races a fresh one started after the loss. Until a challenger takes over, the answers are the plain filter's;
+after a stretch off a map with errors, where the plain filter is lost for good or stays lost for long, the restarted
+filter finds the track again, and sooner."""
 
 from __future__ import annotations
 
@@ -56,7 +56,7 @@ def test_a_race_without_a_takeover_keeps_the_plain_filters_answers(seed):
     # nodes and curves displaced (medium): the filter falls off the map at the loop and challengers race it (twice),
     # but none takes over; until one does, every answer and the path are the plain filter's
     seen, odometry, *_ = loop_drive(seed, "displacement")
-    plain, _, _ = localize(seen, odometry)
+    plain, _, _ = localize(seen, odometry, restart=False)
     restarted, _, localizer = localize(seen, odometry, restart=True)
     assert localizer.filter.restarts[0] >= 1 and localizer.filter.swaps[0] == 0
     assert np.array_equal(plain.state, restarted.state) and np.array_equal(plain.path, restarted.path)
@@ -69,7 +69,7 @@ def test_a_lost_track_is_found_again_sooner(seed):
     # to the end of the drive); the restarted one swaps to its challenger and is right again in half that or less,
     # never sure of a wrong road after the return
     seen, odometry, xy, edge, driven, back = loop_drive(seed, "displacement")
-    plain, frame, _ = localize(seen, odometry)
+    plain, frame, _ = localize(seen, odometry, restart=False)
     plain_m, _ = found_after(seen, plain, frame, xy, edge, driven, back)
     restarted, frame, localizer = localize(seen, odometry, restart=True)
     restarted_m, sure_wrong = found_after(seen, restarted, frame, xy, edge, driven, back)

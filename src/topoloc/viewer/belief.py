@@ -65,8 +65,7 @@ def belief_moments(road: RoadMap, odometry: Odometry, conf: dict[str, Any], ever
             continue
         next_m = driven[frame] + every_m
         filt = localizer.filter
-        bank = filt.coarse if filt.in_coarse[0] else filt.fine
-        marginal = bank.edge_marginals()[0]
+        marginal = filt.road_marginals(0)
         total = float(marginal.sum())
         order = np.argsort(-marginal)[:top_roads]
         order = order[marginal[order] > 0]
