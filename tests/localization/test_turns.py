@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from localization_helpers import irregular_grid
+from localization_helpers import irregular_grid, make_graph
 
 from topoloc.config import load
 from topoloc.localization.connectivity import directed_edges
+from topoloc.localization.metric import cell_grid
 from topoloc.localization.metric.cell_grid import CellGrid
 from topoloc.localization.metric.lane_chains import lane_chains, turn_arc_length
 from topoloc.localization.roadmap import RoadMap
@@ -159,14 +160,6 @@ def test_the_filter_follows_a_car_that_turns_widely():
 def test_a_move_across_roads_shorter_than_a_step_takes_one_u_turn(monkeypatch):
     """OSM junctions hold roads of centimetres; with U-turns at every node a move could bounce U-turn after U-turn
     between their nodes without driving on, each bounce branching (a city map's coarse model ran out of memory)."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "trajectory"))
-    from trajectory_helpers import make_graph
-
-    from topoloc.localization.metric import cell_grid
-
     coords = {0: (0.0, 0.0), 1: (60.0, 0.0), 2: (60.05, 0.0), 3: (60.10, 0.0), 4: (60.15, 0.0), 5: (120.0, 0.0)}
     graph = make_graph(coords, [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5)])
     states = directed_edges(graph, "always")
