@@ -210,7 +210,7 @@ class CityFilter:
     def places(self, k: int, merge_m: float = 0.0, which: NDArray[np.int64] | None = None) -> list[list[Place]]:
         """Per filter (or per filter in ``which``), its ``k`` most probable places (of the coarse belief while in the
         coarse phase)."""
-        which = np.arange(self.fine.filters) if which is None else np.asarray(which, np.int64)
+        which = np.arange(self.filters) if which is None else np.asarray(which, np.int64)
         out = self.fine.places(k, merge_m, which)
         coarse = np.flatnonzero(self.in_coarse[which]) if self.coarse is not None else np.zeros(0, np.int64)
         if len(coarse):
