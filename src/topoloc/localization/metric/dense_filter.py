@@ -33,6 +33,8 @@ REAL, COMPLEX = np.float32, np.complex64
 #: At most this many entries when a filter splits into its scale classes (maps of up to 131,072 cells split at a
 #: 32nd of the map; a city map's split belief would otherwise hold hundreds of thousands of entries).
 SPLIT_MAX = 4096
+#: Most slots (groups x cells) of the distinct-key numbering in a step (:meth:`MetricFilter._unique`): 128 MB.
+SLOTS_MAX = 1 << 24
 
 
 def _gather(matrix: sp.csr_matrix, rows: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
@@ -87,6 +89,7 @@ class MetricFilter:
         # percent of the map, where each split entry costs ``classes`` times as much
         self._split_at = min(self.grid.num_cells // 32, SPLIT_MAX)
         self._walks = model.settings.branches == "walks"
+        self._slots: NDArray[np.int64] | None = None  # a slot per (group, cell) key, for _unique
 
     @property
     def num_cells(self) -> int:
@@ -222,6 +225,22 @@ class MetricFilter:
         self.ahead = total - moves
         return moves
 
+    def _unique(self, keys: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """``np.unique(keys, return_inverse=True)`` for keys below groups x cells: only the distinct keys are sorted,
+        found and numbered through a slot per key (the moves of a step land on about a third as many cells as
+        there are moves); past :data:`SLOTS_MAX` slots, ``np.unique`` itself."""
+        size = self.filters * self.classes * self.num_cells
+        if size > SLOTS_MAX:
+            return np.unique(keys, return_inverse=True)
+        if self._slots is None:
+            self._slots = np.empty(size, np.int64)
+        slots = self._slots
+        index = np.arange(len(keys))
+        slots[keys] = index
+        distinct = np.sort(keys[slots[keys] == index])  # one entry per key: the last written
+        slots[distinct] = np.arange(len(distinct))
+        return distinct, slots[keys]
+
     def _predict(self, direction: int, movers: NDArray[np.bool_]) -> None:
         """Move the entries of the groups ``movers`` (per group) one cell along the roads (back if ``direction`` < 0)."""
         model = self.model
@@ -243,7 +262,7 @@ class MetricFilter:
         sparse = (movers & ~dense)[self.group]
         if sparse.any():  # concentrated beliefs, all groups together: the moves of their cells
             owner, dst, p = _gather(rows, self.cell[sparse])
-            keys, inverse = np.unique(self.group[sparse][owner] * n + dst, return_inverse=True)
+            keys, inverse = self._unique(self.group[sparse][owner] * n + dst)
             flow = carried[sparse][owner] * p
             weight = np.bincount(inverse, weights=self.weight[sparse][owner] * p, minlength=len(keys)).astype(REAL)
             resultant = (np.bincount(inverse, weights=flow.real, minlength=len(keys))
