@@ -88,9 +88,9 @@ class MetricLocalizer(RoadLocalizer):
             if len(fresh):
                 bank.start(fresh)
             bank.update(int(steps.direction[j]), float(steps.yaw[j]))
-            for b, places in enumerate(bank.places(self.top, self.merge_m)):
-                if first[b] <= j:
-                    answers[b].append(Answer.of_places(places))
+            started = np.flatnonzero(first <= j)
+            for b, places in zip(started.tolist(), bank.places(self.top, self.merge_m, started)):
+                answers[b].append(Answer.of_places(places))
         out = []
         for b, start in enumerate(starts):
             cells = bank.path(b)

@@ -141,9 +141,9 @@ class RestartingFilter:
         """The answer of main filter ``which``."""
         return self.answers()[which]
 
-    def places(self, k: int, merge_m: float = 0.0) -> list[list[Place]]:
-        """Per main filter, its ``k`` most probable places."""
-        return self.bank.places(k, merge_m, self.slot)
+    def places(self, k: int, merge_m: float = 0.0, which: NDArray[np.int64] | None = None) -> list[list[Place]]:
+        """Per main filter (or per main filter in ``which``), its ``k`` most probable places."""
+        return self.bank.places(k, merge_m, self.slot if which is None else self.slot[np.asarray(which, np.int64)])
 
     def top_places(self, k: int, merge_m: float = 0.0, which: int = 0) -> list[Place]:
         """The ``k`` most probable places of main filter ``which``."""
