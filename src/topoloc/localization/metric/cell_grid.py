@@ -226,7 +226,9 @@ class CellGrid:
 
     @cached_property
     def u_turn_chain(self) -> NDArray[np.bool_]:
-        """Per chain, whether it is a U-turn (a turn of 180 deg either way through its node)."""
+        """Per chain, whether it is a U-turn: the metric filter's U-turn chains turn by exactly 180 deg either way
+        (:func:`~topoloc.localization.metric.lane_chains.lane_chains`); the token HMM's chains carry no turn, so
+        its moves, one road at a time, are not limited."""
         return np.abs(self.chains.turn) > np.pi - 1e-6
 
     @cached_property
