@@ -3,30 +3,32 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from topoloc.localization.places import belief_places
 
 
-def bank(seed: int) -> dict:
-    """Three filters' entries over 8 cells of 4 roads, cells of one road repeating."""
+def bank(seed: int, roads: int = 4) -> dict:
+    """Three filters' entries over two cells per road, cells of one road repeating."""
     rng = np.random.default_rng(seed)
     owner = rng.integers(0, 3, 60)
-    cell = rng.integers(0, 8, 60)
+    cell = rng.integers(0, 2 * roads, 60)
     weight = rng.random(60)
     for f in range(3):
         weight[owner == f] /= weight[owner == f].sum()
-    edge = np.array([0, 0, 1, 1, 2, 2, 3, 3])
-    xy = np.column_stack([np.arange(8.0), np.zeros(8)])
-    return dict(owner=owner, cell=cell, weight=weight, cell_edge=edge, cell_xy=xy, filters=3, roads=4, k=2)
+    edge = np.repeat(np.arange(roads), 2)
+    xy = np.column_stack([np.arange(2.0 * roads), np.zeros(2 * roads)])
+    return dict(owner=owner, cell=cell, weight=weight, cell_edge=edge, cell_xy=xy, filters=3, roads=roads, k=2)
 
 
-def test_places_of_some_filters_are_theirs_among_all():
+@pytest.mark.parametrize("roads", [4, 12])  # every road a candidate; the 8 likeliest of 12 (argpartition)
+def test_places_of_some_filters_are_theirs_among_all(roads):
     for seed in range(5):
-        args = bank(seed)
+        args = bank(seed, roads)
         every = belief_places(**args)
         assert len(every) == 3
-        for which in ([2, 0], [1], [0, 1, 2]):
-            assert belief_places(**args, which=np.array(which)) == [every[f] for f in which]
+        for which in ([2, 0], [1], [0, 1, 2], []):
+            assert belief_places(**args, which=np.array(which, np.int64)) == [every[f] for f in which]
 
 
 def test_a_place_is_a_roads_mass_at_its_largest_entry():
