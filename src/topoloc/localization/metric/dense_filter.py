@@ -17,10 +17,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from topoloc.localization.metric.map_model import MetricModel
+from topoloc.localization.metric.sparse_moves import DistinctKeys, gather_rows
 from topoloc.localization.metric.von_mises import concentration, resultant_length
 from topoloc.localization.places import belief_places
 from topoloc.localizer import Place
@@ -33,17 +33,6 @@ REAL, COMPLEX = np.float32, np.complex64
 #: At most this many entries when a filter splits into its scale classes (maps of up to 131,072 cells split at a
 #: 32nd of the map; a city map's split belief would otherwise hold hundreds of thousands of entries).
 SPLIT_MAX = 4096
-#: Most slots (groups x cells) of the distinct-key numbering in a step (:meth:`MetricFilter._unique`): 128 MB.
-SLOTS_MAX = 1 << 24
-
-
-def _gather(matrix: sp.csr_matrix, rows: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
-    """Entries of ``rows`` of a CSR matrix: (position in ``rows``, column, value)."""
-    counts = matrix.indptr[rows + 1] - matrix.indptr[rows]
-    owner = np.repeat(np.arange(len(rows)), counts)
-    idx = np.repeat(matrix.indptr[rows], counts) + (np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
-    return owner, matrix.indices[idx], matrix.data[idx]
-
 
 @dataclass
 class Estimate:
@@ -89,7 +78,7 @@ class MetricFilter:
         # percent of the map, where each split entry costs ``classes`` times as much
         self._split_at = min(self.grid.num_cells // 32, SPLIT_MAX)
         self._walks = model.settings.branches == "walks"
-        self._slots: NDArray[np.int64] | None = None  # a slot per (group, cell) key, for _unique
+        self._distinct = DistinctKeys(self.filters * self.classes * self.grid.num_cells)  # (group, cell) keys
 
     @property
     def num_cells(self) -> int:
@@ -225,22 +214,6 @@ class MetricFilter:
         self.ahead = total - moves
         return moves
 
-    def _unique(self, keys: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-        """``np.unique(keys, return_inverse=True)`` for keys below groups x cells: only the distinct keys are sorted,
-        found and numbered through a slot per key (the moves of a step land on about a third as many cells as
-        there are moves); past :data:`SLOTS_MAX` slots, ``np.unique`` itself."""
-        size = self.filters * self.classes * self.num_cells
-        if size > SLOTS_MAX:
-            return np.unique(keys, return_inverse=True)
-        if self._slots is None:
-            self._slots = np.empty(size, np.int64)
-        slots = self._slots
-        index = np.arange(len(keys))
-        slots[keys] = index
-        distinct = np.sort(keys[slots[keys] == index])  # one entry per key: the last written
-        slots[distinct] = np.arange(len(distinct))
-        return distinct, slots[keys]
-
     def _predict(self, direction: int, movers: NDArray[np.bool_]) -> None:
         """Move the entries of the groups ``movers`` (per group) one cell along the roads (back if ``direction`` < 0)."""
         model = self.model
@@ -261,8 +234,8 @@ class MetricFilter:
             moved[int(g)] = (cells, flows[0][cells], (flows[1][cells] + 1j * flows[2][cells]).astype(COMPLEX))
         sparse = (movers & ~dense)[self.group]
         if sparse.any():  # concentrated beliefs, all groups together: the moves of their cells
-            owner, dst, p = _gather(rows, self.cell[sparse])
-            keys, inverse = self._unique(self.group[sparse][owner] * n + dst)
+            owner, dst, p = gather_rows(rows, self.cell[sparse])
+            keys, inverse = self._distinct(self.group[sparse][owner] * n + dst)
             flow = carried[sparse][owner] * p
             weight = np.bincount(inverse, weights=self.weight[sparse][owner] * p, minlength=len(keys)).astype(REAL)
             resultant = (np.bincount(inverse, weights=flow.real, minlength=len(keys))
