@@ -54,7 +54,7 @@ The modules of this package:
 * :mod:`~topoloc.localization.metric.city_filter`: the city-scale variant (coarse cells while the belief is
   broad);
 * :mod:`~topoloc.localization.metric.restart`: filters that race a fresh one after losing their track
-  (``restart``, off by default).
+  (``restart``, on by default).
 
 Every filter follows :class:`topoloc.localizer.Filter`; the registered localizer ``metric`` is the adapter
 :mod:`topoloc.localizers.metric`.

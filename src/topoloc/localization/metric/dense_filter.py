@@ -330,8 +330,7 @@ class MetricFilter:
 
     def answers(self) -> list[Estimate]:
         """Per filter: the road of largest probability, its most probable cell, and that probability."""
-        marginal = self.edge_marginals()
-        edge = np.argmax(marginal, axis=1)
+        edge, confidence = self.roads()
         filt = self.group // self.classes
         on = self.grid.edge[self.cell] == edge[filt]
         order = np.lexsort((-self.weight[on], filt[on]))
@@ -343,7 +342,7 @@ class MetricFilter:
                 out.append(Estimate(-1, -1, np.full(2, np.nan), 0.0, float(self.offmap[b])))
                 continue
             cell = int(cells[first[b]])
-            out.append(Estimate(int(edge[b]), cell, self.grid.xy[cell].copy(), float(marginal[b, edge[b]]), float(self.offmap[b])))
+            out.append(Estimate(int(edge[b]), cell, self.grid.xy[cell].copy(), float(confidence[b]), float(self.offmap[b])))
         return out
 
     def answer(self, which: int = 0) -> Estimate:
