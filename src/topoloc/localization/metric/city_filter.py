@@ -39,7 +39,8 @@ def coarse_settings(settings: MetricSettings) -> MetricSettings:
     k = settings.coarse_factor
     return dataclasses.replace(settings, cell_m=settings.cell_m * k, step_jitter=settings.step_jitter / k,
                                heading_sigma_deg=settings.coarse_spread * settings.heading_sigma_deg,
-                               turn_sigma_share=settings.coarse_spread * settings.turn_sigma_share, scale_classes=1, coarse_factor=1)
+                               turn_sigma_share=settings.coarse_spread * settings.turn_sigma_share, scale_classes=1, coarse_factor=1,
+                               lateral_offset_m=0.0)
 
 
 def uses_coarse(settings: MetricSettings, fine_cells: int) -> bool:

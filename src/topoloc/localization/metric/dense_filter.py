@@ -7,8 +7,10 @@ is paid once per step, not once per start. Within a filter, once the belief is n
 ``scale_classes`` *groups*, one per odometry scale error in ``[-scale_error_max, scale_error_max]``: a group
 with scale error ``s`` moves ``1 / (1 + s)`` cells per step on average (an extra or a skipped move now and
 then), so the group whose lengths agree with the map's wins at the turns, and a systematic scale error of
-the odometry no longer makes a look-alike road fit better than the true one. A lost filter (more likely off
-the map than on it) merges its groups again and takes back mass spread over the whole map.
+the odometry no longer makes a look-alike road fit better than the true one. With ``lateral_offset_m`` two more
+groups drive that far left and right of the lane: they move less along the map on the outside of a turn and more on
+its inside. A lost filter (more likely off the map than on it) merges its groups again and takes back mass spread
+over the whole map.
 """
 
 from __future__ import annotations
@@ -56,11 +58,12 @@ class MetricFilter:
     def __init__(self, model: MetricModel, filters: int = 1, keep_top: int = 512) -> None:
         self.model, self.settings, self.grid = model, model.settings, model.grid
         self.filters, self.prune, self.keep_top = int(filters), model.settings.prune, keep_top
-        self.classes = len(model.scales)
-        self.center = self.classes // 2
-        self.step_cells = 1.0 / (1.0 + model.scales)  # cells a group of each scale class moves per step
+        self.classes = len(model.class_scale)
+        self.center = len(model.scales) // 2
+        self.step_cells = 1.0 / (1.0 + model.class_scale)  # cells a group of each class moves per step
+        self.offset_cells = model.class_offset_m / model.settings.cell_m  # cells fewer per radian turned left
         groups = self.filters * self.classes
-        self.group = np.zeros(0, np.int64)  # group of each entry: filter * classes + scale class
+        self.group = np.zeros(0, np.int64)  # group of each entry: filter * classes + class
         self.cell = np.zeros(0, np.int64)
         self.weight = np.zeros(0, REAL)
         self.kappa = np.zeros(0, REAL)  # heading offset per entry: von Mises concentration and mean e^{i theta}
@@ -196,7 +199,7 @@ class MetricFilter:
         mine = np.isin(self.group // self.classes, ready)
         parts = [self._keep(~mine)]
         group, cell, weight, kappa, mean = self._keep(mine)
-        for k, share in enumerate(self.model.scale_prior):
+        for k, share in enumerate(self.model.class_prior):
             parts.append((group - self.center + k, cell, weight * share, kappa, mean))
         self._set(*(np.concatenate(p) for p in zip(*parts)))
         self.split[ready] = True
@@ -205,13 +208,18 @@ class MetricFilter:
 
     # -- one step --------------------------------------------------------------------------------------------
 
-    def _moves(self) -> NDArray[np.int64]:
-        """Whole cells every group moves this step (one, or now and then none or two for a scale error)."""
+    def _moves(self, yaw: float) -> NDArray[np.int64]:
+        """Whole cells every group moves this step (one, or now and then none or two for a scale error or, in a
+        turn, a lateral offset)."""
         filters = np.arange(self.filters * self.classes) // self.classes
         cells = np.where(self.split[filters], np.tile(self.step_cells, self.filters), 1.0)
+        if self.offset_cells.any():
+            turn = np.angle(np.exp(1j * (yaw - self.last_yaw)))  # NaN before a filter's first step
+            turn = np.where(np.isfinite(turn), turn, 0.0)[filters]
+            cells = cells - np.where(self.split[filters], np.tile(self.offset_cells, self.filters), 0.0) * turn
         total = self.ahead + cells
-        moves = np.floor(total + 1e-9).astype(np.int64)
-        self.ahead = total - moves
+        moves = np.clip(np.floor(total + 1e-9), 0, 2).astype(np.int64)
+        self.ahead = np.clip(total - moves, -1.0, 1.0)
         return moves
 
     def _predict(self, direction: int, movers: NDArray[np.bool_]) -> None:
@@ -260,7 +268,7 @@ class MetricFilter:
         for every running filter."""
         model = self.model
         self._reenter()
-        moves = self._moves()
+        moves = self._moves(yaw)
         before = np.bincount(self.group // self.classes, weights=self.weight, minlength=self.filters) if self._walks else None
         for move in (1, 2):
             if (moves >= move).any():

@@ -55,6 +55,7 @@ class MetricSettings:
     u_turn_weight: float = 0.02
     turn_path: str = "node"
     wide_zone_m: float = 0.0
+    lateral_offset_m: float = 0.0
 
     @classmethod
     def from_conf(cls, conf: dict) -> MetricSettings:
@@ -107,6 +108,13 @@ class MetricModel:
         spread = settings.scale_error_max / 2.0 if settings.scale_error_max > 0 else 1.0
         prior = np.exp(-0.5 * (self.scales / spread) ** 2)
         self.scale_prior = prior / prior.sum()
+        # the groups a split belief holds: the scale classes, then (with lateral_offset_m) a class driven that far
+        # left and one that far right of the lane, without scale error, each as likely as the largest scale error
+        extra = [-settings.lateral_offset_m, settings.lateral_offset_m] if settings.lateral_offset_m > 0 else []
+        self.class_scale = np.concatenate([self.scales, np.zeros(len(extra))])
+        self.class_offset_m = np.concatenate([np.zeros(k), extra])
+        prior = np.concatenate([self.scale_prior, np.full(len(extra), self.scale_prior[0])])
+        self.class_prior = prior / prior.sum()
 
     def offmap_density(self, turn: NDArray[np.float64]) -> NDArray[np.float64]:
         """Density of a heading change ``turn`` (radians, per step) off the map; NaN (no last heading): uniform."""
