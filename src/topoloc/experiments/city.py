@@ -2,10 +2,10 @@
 simulated drives, one job per noise level (rule ``localize_city``), and their summary (rule ``summarize_city``).
 
 Per map and level, ``drives`` random drives of 3-10 km drawn from ``[seed, map's place, level's place]``. Every drive
-is localized from a start every ``start_every_m`` beside the oracle, and once live from its first frame, step by
-step, to time one filter: CPU seconds per step while unsure (before the first answer with confidence >= ``sure``)
-and after, as a multiple of real time for a car at 10 m/s (one step of ``cell_m`` = 0.2 s). The peak memory
-(resident set) is the job's process after each drive; the maps run one after the other in it.
+is localized from a start every ``start_every_m`` (``starts_per_bank`` at a time) beside the oracle, and once live
+from its first frame, step by step, to time one filter: CPU seconds per step while unsure (before the first answer
+with confidence >= ``sure``) and after, as a multiple of real time for a car at 10 m/s (one step of ``cell_m`` =
+0.2 s). The peak memory (resident set) is the job's process after each drive; the maps run one after the other in it.
 """
 
 from __future__ import annotations
@@ -118,7 +118,9 @@ def localize_level(conf: dict[str, Any], level: str, figures: Path | None) -> tu
             oracle_cpu += time.process_time() - t0
             drive = f"{map_name}/{level}/{drive_index:02d}"
             t0 = time.process_time()
-            runs = localizer.run_starts(odometry, road, loc_conf, starts)
+            bank = int(exp["starts_per_bank"])  # a bank's broad beliefs take memory (each start with its challenger)
+            runs = [run for k in range(0, len(starts), bank)
+                    for run in localizer.run_starts(odometry, road, loc_conf, starts[k:k + bank])]
             starts_cpu = time.process_time() - t0
             rows += start_rows(judge, truth, runs, limits, ev, "metric", map=map_name, level=level, drive=drive)
             row = {"map": map_name, "level": level, "drive": drive, "length_m": sim.length_m, "starts": len(starts),
