@@ -16,7 +16,8 @@ the loop end are scored before it only), loc_share and median_ratio (of the reso
 wrong: confidence >= 0.9 and wrong, of all answers; off the map every road is wrong), recov_* (from the return
 onto the map: localized again within 1.5x the oracle's distance from there, the median ratio, never, and
 ``recov_within_1.5_fresh``: within 1.5x the distance a filter started fresh at the return takes, the best a
-recovery can do on that map), and the CPU seconds of the filter; then the recoveries of the start at frame 0 of
+recovery can do on that map), ece (the expected calibration error of all answers, "no road" right off the map),
+and the CPU seconds of the filter; then the recoveries of the start at frame 0 of
 each drive (``fresh_m``: the fresh start's distance, inf where it never localizes).
 """
 
@@ -35,6 +36,7 @@ import shapely
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import dotted_overrides, load
 from topoloc.graph.road_graph import RoadGraph
+from topoloc.localization import calibration
 from topoloc.localization.evaluation import Judge, localized_step, start_frames
 from topoloc.localization.oracle import Oracle, true_path
 from topoloc.localization.roadmap import RoadMap
@@ -162,7 +164,10 @@ def run(conf: dict, graph: RoadGraph, level: str, n_drives: int, seed: int, star
             if s in extra:
                 continue
             cw = ~right & (conf_ >= ev["sure"])
-            row = {"drive": d, "start": s, "steps": len(fr), "cw": cw.sum(), "cw_off": (cw & ~m).sum()}
+            # calibration over every answer, "no road" right where the drive is off the map
+            judged = judge.right(st, edge[fr], xy[fr])
+            row = {"drive": d, "start": s, "steps": len(fr), "cw": cw.sum(), "cw_off": (cw & ~m).sum(),
+                   **calibration.bin_sums(conf_, judged)}
             if rejoin is not None and s >= rejoin - 200 and s < rejoin:
                 continue
             if rejoin is None or s >= rejoin:
@@ -191,7 +196,8 @@ def summary(tab: pd.DataFrame, rec: pd.DataFrame, cpu: float) -> dict[str, float
     res = tab[np.isfinite(tab.oracle)]
     out = {"starts": len(tab), "resolved": len(res), "loc_share": float(np.isfinite(res["loc"]).mean()) if len(res) else np.nan,
            "median_ratio": float(np.median(np.where(np.isfinite(res["loc"]), res["loc"], np.inf) / res.oracle)) if len(res) else np.nan,
-           "cw": float(tab.cw.sum() / tab.steps.sum()), "cw_offmap": float(tab.cw_off.sum() / tab.steps.sum()), "cpu": cpu}
+           "cw": float(tab.cw.sum() / tab.steps.sum()), "cw_offmap": float(tab.cw_off.sum() / tab.steps.sum()),
+           "ece": calibration.ece(tab), "cpu": cpu}
     if len(rec):
         r = rec[np.isfinite(rec.oracle_m)]
         ratio = np.where(np.isfinite(r.recover_m), r.recover_m, np.inf) / r.oracle_m

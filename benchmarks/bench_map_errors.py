@@ -28,6 +28,7 @@ import pandas as pd
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import dotted_overrides, load
 from topoloc.experiments.map_error_starts import localize_error, table
+from topoloc.experiments.map_errors import plot_calibration
 from topoloc.odometry.map_errors import ERROR_TYPES
 
 REPO = Path(__file__).resolve().parents[1]
@@ -76,6 +77,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.starts:
             args.starts.parent.mkdir(parents=True, exist_ok=True)
             frame.to_csv(args.starts, index=False)
+        reliability = args.out.with_name(f"{args.out.stem}_reliability.png")
+        pooled_ece = plot_calibration([frame], reliability, tuple(dict.fromkeys(["none", *exp["levels"]])))
         print(f"# Map errors: maps {', '.join(maps)}; {args.drives} random drives + out-and-back, block circled twice, "
               f"long straight (mirror walks on dual_grid); odometry noise {exp['noise']}; a start every "
               f"{args.start_every:g} m\n")
@@ -87,6 +90,8 @@ def main(argv: list[str] | None = None) -> int:
         print(table(frame, ["pattern", "localizer"]).to_markdown(index=False, floatfmt=".3f"))
         print(f"\nCPU seconds (all starts): {', '.join(f'{k} {v:.1f}' for k, v in cpu.items())}; "
               f"wall {time.time() - began:.0f} s")
+        print(f"\nExpected calibration error of all answers, every error type, map and level pooled: "
+              f"{', '.join(f'{k} {v:.4f}' for k, v in pooled_ece.items())} (reliability diagram: {reliability})")
     return 0
 
 

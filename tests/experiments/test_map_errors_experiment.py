@@ -12,6 +12,7 @@ from tests.conftest import make_config
 from topoloc.errors import InputError
 from topoloc.experiments import map_error_starts, map_errors
 from topoloc.experiments.many_starts import targets
+from topoloc.localization import calibration
 
 
 def _conf(error, **experiment):
@@ -63,9 +64,10 @@ def test_the_mirror_walk_is_not_resolved_by_the_oracle(jobs):
 
 def test_summary_per_error_type_and_level(jobs):
     tmp, inputs = jobs
-    outputs = {"summary": str(tmp / "summary.md"), "json": str(tmp / "summary.json")}
+    outputs = {"summary": str(tmp / "summary.md"), "json": str(tmp / "summary.json"),
+               "reliability": str(tmp / "reliability.png")}
     conf = _conf("none", maps=["dual_grid", "grid"], levels=["medium"], drives=1, localizers=["hmm"])
-    map_errors.summarize({"map_errors": conf["map_errors"]}, inputs, outputs)
+    metrics = map_errors.summarize({"map_errors": conf["map_errors"]}, inputs, outputs)
     text = (tmp / "summary.md").read_text()
     assert text.startswith("## Map errors: localizers against the oracle of the map they see")
     assert "missing_road/medium" in text and "none/none" in text
@@ -74,6 +76,13 @@ def test_summary_per_error_type_and_level(jobs):
     frame = pd.read_csv(inputs["starts_missing_road"])
     job = next(j for j in data["jobs"] if j["job"] == "missing_road/medium")
     assert job["oracle_resolved"] == pytest.approx(np.isfinite(frame.oracle_m).mean())
+    # calibration: the ECE of each job's answers in the summary, and of every job's pooled in the metrics and figure
+    assert job["ece"] == pytest.approx(calibration.ece(frame))
+    assert next(line for line in text.splitlines() if line.startswith("| localizer")).rstrip(" |").endswith("ece")
+    pooled = pd.concat([pd.read_csv(inputs[k]) for k in sorted(inputs)])
+    assert metrics["hmm/up_to_medium/ece"] == pytest.approx(calibration.ece(pooled))
+    assert metrics["hmm/up_to_medium/ece"] != pytest.approx(job["ece"])  # both jobs' answers, not one's
+    assert (tmp / "reliability.png").stat().st_size > 10_000
 
 
 def test_unknown_map_is_one_clear_error(tmp_path):

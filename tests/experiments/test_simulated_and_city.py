@@ -12,6 +12,7 @@ from tests.conftest import make_config
 from topoloc.errors import InputError
 from topoloc.experiments import city, simulated
 from topoloc.experiments.many_starts import targets
+from topoloc.localization import calibration
 from topoloc.experiments.maps import grid_osm
 
 
@@ -68,9 +69,15 @@ def test_simulated_level_job(simulated_levels):
 
 def test_simulated_summary_mean_and_spread_over_levels(simulated_levels):
     tmp, experiments, inputs = simulated_levels
-    outputs = {"summary": str(tmp / "summary.md"), "json": str(tmp / "summary.json")}
-    simulated.summarize({"simulated": experiments["simulated"]}, inputs, outputs)
-    shares = [targets(pd.read_csv(inputs[f"starts_{lv}"]))["localized_share"] for lv in ("low", "medium")]
+    outputs = {"summary": str(tmp / "summary.md"), "json": str(tmp / "summary.json"),
+               "reliability": str(tmp / "reliability.png")}
+    metrics = simulated.summarize({"simulated": experiments["simulated"]}, inputs, outputs)
+    frames = [pd.read_csv(inputs[f"starts_{lv}"]) for lv in ("low", "medium")]
+    shares = [targets(frame)["localized_share"] for frame in frames]
+    # calibration over both levels' answers pooled: the figure and its ECE, not the mean of the levels' ECEs
+    assert metrics["hmm/ece_all_levels"] == pytest.approx(calibration.ece(pd.concat(frames)))
+    assert metrics["hmm/ece_all_levels"] != pytest.approx(metrics["hmm/ece_mean"])
+    assert (tmp / "reliability.png").stat().st_size > 10_000
     text = (tmp / "summary.md").read_text()
     assert text.startswith("## Simulated drives: localizers against the oracle\n\nLocalizers beside the oracle")
     assert f"{np.mean(shares):.3f} ± {np.std(shares, ddof=1):.3f}" in text

@@ -50,6 +50,20 @@ def test_bin_sums_of_starts_add_up_to_the_pooled_answers():
     assert calibration.reliability(rows).answers.sum() == 3000
 
 
+def test_reliability_per_localizer_pools_its_starts_and_leaves_out_the_named_ones():
+    rng = np.random.default_rng(2)
+    rows = []
+    for name, honest in (("honest", True), ("over", False), ("honest", True), ("oracle", True)):
+        rows.append({"localizer": name, **calibration.bin_sums(*synthetic(rng, 2000, honest))})
+    frame = pd.DataFrame(rows)
+    diagrams = calibration.reliability_per(frame, skip=["oracle"])
+    assert list(diagrams) == ["honest", "over"]
+    assert diagrams["honest"].answers.sum() == 4000 and diagrams["over"].answers.sum() == 2000
+    # the overconfident one is right a third as often as it says in its top bin
+    assert diagrams["over"].share_right[9] == pytest.approx(diagrams["over"].confidence[9] / 3, abs=0.05)
+    assert diagrams["honest"].share_right[9] == pytest.approx(diagrams["honest"].confidence[9], abs=0.05)
+
+
 def test_the_evaluation_scores_calibration_with_the_judge():
     graph = corridor_graph()
     x = np.arange(0.0, 300.0)

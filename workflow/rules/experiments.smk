@@ -34,6 +34,12 @@ rule summarize_simulated:
     output:
         summary=f"{EXPERIMENT}/simulated/summary.md",
         json=f"{EXPERIMENT}/simulated/summary.json",
+        reliability=report(
+            f"{EXPERIMENT}/simulated/reliability.png",
+            caption="../report/experiment_reliability.rst",
+            category="Localization",
+            labels={"region": "{region}", "figure": "reliability, simulated drives"},
+        ),
     params:
         conf={"simulated": EXPERIMENTS["simulated"]},
         code=code("topoloc.experiments.simulated"),
@@ -81,6 +87,12 @@ rule summarize_map_errors:
     output:
         summary=f"{EXPERIMENT}/map_errors/summary.md",
         json=f"{EXPERIMENT}/map_errors/summary.json",
+        reliability=report(
+            f"{EXPERIMENT}/map_errors/reliability.png",
+            caption="../report/experiment_reliability.rst",
+            category="Localization",
+            labels={"region": "{region}", "figure": "reliability, map errors up to medium"},
+        ),
     params:
         conf={"map_errors": EXPERIMENTS["map_errors"]},
         code=code("topoloc.experiments.map_errors"),

@@ -46,7 +46,9 @@ log = logging.getLogger(__name__)
 
 #: The figures per error type, level and localizer: the oracle's, then :func:`targets`' on the oracle-resolved starts.
 FIGURES = ["oracle_resolved", "oracle_median_m", "localized_share", "median_ratio", "accuracy_after",
-           "position_error_m", "confident_wrong_all"]
+           "position_error_m", "confident_wrong_all", "ece"]
+#: The levels the issue's calibration targets cover (every error type up to the medium level).
+UP_TO_MEDIUM = ("none", "low", "medium")
 
 
 def load_base(name: str, conf: dict[str, Any], inputs: dict[str, str], scratch: Path) -> tuple[RoadGraph, list]:

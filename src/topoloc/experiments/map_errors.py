@@ -15,9 +15,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from topoloc.experiments.map_error_starts import FIGURES, figures, localize_error, report
+from topoloc.experiments.map_error_starts import FIGURES, UP_TO_MEDIUM, figures, localize_error, report
 from topoloc.experiments.summary import write_summary
 from topoloc.io import write_json, write_text
+from topoloc.localization import calibration
+from topoloc.localization.plot import plot_reliability
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
@@ -47,9 +49,25 @@ def summary_jobs(frames: list[pd.DataFrame]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def plot_calibration(frames: list[pd.DataFrame], path: str | Path,
+                     levels: tuple[str, ...] = UP_TO_MEDIUM) -> dict[str, float]:
+    """The reliability diagram of each localizer's answers, every error type and map pooled, at ``levels`` (by
+    default those of the calibration target, :data:`UP_TO_MEDIUM`), to ``path``; their ECE per localizer."""
+    pooled = pd.concat(frames, ignore_index=True)
+    pooled = pooled[pooled.level.isin(levels)]
+    if pooled.empty:
+        raise ValueError(f"no starts at the levels {', '.join(levels)} to plot the reliability of")
+    plot_reliability(calibration.reliability_per(pooled), path,
+                     f"Map errors ({', '.join(sorted(set(pooled.error)))}), levels "
+                     f"{', '.join(level for level in levels if level in set(pooled.level))}: reliability "
+                     f"of the answers' confidence, {len(pooled.drop_duplicates(['localizer', 'drive', 'start']))} starts")
+    return {str(name): calibration.ece(group) for name, group in pooled.groupby("localizer", sort=False)}
+
+
 def summarize(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
-    """``summary`` (markdown) and ``json``: per localizer and error type the figures at each level (inputs
-    ``starts_<error>``), beside the oracle of the map the localizer sees."""
+    """``summary`` (markdown), ``json`` and ``reliability`` (figure, :func:`plot_calibration`): per localizer and
+    error type the figures at each level (inputs ``starts_<error>``), beside the oracle of the map the localizer
+    sees."""
     exp = conf["map_errors"]
     frames = [pd.read_csv(inputs[key]) for key in sorted(inputs) if key.startswith("starts_")]
     jobs = summary_jobs(frames)
@@ -62,9 +80,12 @@ def summarize(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, s
                 f"Judged on the map: the true position projected onto the map road it is mapped as (off-map where the "
                 f"map lacks the road); the oracle is that of the map. oracle_resolved: share of starts the oracle "
                 f"resolves; the localizer's figures are on those starts (localized_share: the share of them "
-                f"localized); confident_wrong_all: wrong answers with confidence >= sure, of all answers.")
+                f"localized); confident_wrong_all: wrong answers with confidence >= sure, of all answers; ece: the "
+                f"expected calibration error of all answers (reliability.png: every error type up to medium pooled).")
     write_summary(outputs, "Map errors: localizers against the oracle of the map they see", sentence,
                   jobs[["localizer", "job", *FIGURES]], "job", ["localizer"], FIGURES)
+    pooled_ece = plot_calibration(frames, outputs["reliability"])
     medium = jobs[jobs.level.isin(["medium", "none"])]
-    return {f"{r.localizer}/{r.error}/{r.level}/{f}": float(getattr(r, f)) for r in medium.itertuples()
-            for f in FIGURES if np.isfinite(getattr(r, f))}
+    metrics = {f"{r.localizer}/{r.error}/{r.level}/{f}": float(getattr(r, f)) for r in medium.itertuples()
+               for f in FIGURES if np.isfinite(getattr(r, f))}
+    return metrics | {f"{name}/up_to_medium/ece": value for name, value in pooled_ece.items() if np.isfinite(value)}

@@ -22,8 +22,10 @@ from topoloc.experiments.many_starts import start_rows, targets
 from topoloc.experiments.maps import load_map
 from topoloc.experiments.summary import write_summary
 from topoloc.io import write_json, write_text
+from topoloc.localization import calibration
 from topoloc.localization.evaluation import DriveTruth, Judge, start_frames
 from topoloc.localization.oracle import Oracle, true_path
+from topoloc.localization.plot import plot_reliability
 from topoloc.localization.roadmap import RoadMap
 from topoloc.odometry.simulate import NOISE_LEVELS, simulate_pattern_drive
 from topoloc.registry import make, registry
@@ -121,18 +123,27 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
 
 def summarize(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
     """``summary`` (markdown) and ``json``: per localizer and level the targets, and their mean and spread over the
-    levels (inputs ``starts_<level>``)."""
+    levels (inputs ``starts_<level>``); ``reliability``: the reliability diagram of each localizer's answers over
+    every level."""
     exp = conf["simulated"]
-    jobs = []
+    jobs, frames = [], []
     for level in exp["levels"]:
         frame = pd.read_csv(inputs[f"starts_{level}"])
+        frames.append(frame)
         jobs += [{"localizer": name, "level": level, **targets(group)} for name, group in frame.groupby("localizer", sort=False)]
+    pooled = pd.concat(frames, ignore_index=True)
+    plot_reliability(calibration.reliability_per(pooled), outputs["reliability"],
+                     f"Simulated drives, noise {', '.join(exp['levels'])}: reliability of the answers' confidence, "
+                     f"{len(pooled.drop_duplicates(['localizer', 'drive', 'start']))} starts")
     jobs = pd.DataFrame(jobs).sort_values("localizer", kind="stable")
     sentence = (f"Localizers beside the oracle on simulated drives of {', '.join(exp['maps'])}: per map and noise level "
                 f"{exp['drives']} random drives of 0.5-4 km, a circuit driven twice and a stop-and-reverse drive "
                 f"(seed {exp['seed']}), a start every {exp['start_every_m']:g} m; figures of the oracle-resolved "
-                f"starts per level, then their mean and sample standard deviation over the levels.")
+                f"starts per level, then their mean and sample standard deviation over the levels; ece: the expected "
+                f"calibration error of all answers (reliability.png: every level pooled).")
     write_summary(outputs, "Simulated drives: localizers against the oracle", sentence, jobs, "level", ["localizer"],
                   FIGURES)
-    return {f"{r.localizer}/{f}_mean": float(getattr(r, f)) for r in jobs.groupby("localizer").mean(numeric_only=True)
-            .reset_index().itertuples() for f in FIGURES if np.isfinite(getattr(r, f))}
+    metrics = {f"{r.localizer}/{f}_mean": float(getattr(r, f)) for r in jobs.groupby("localizer").mean(numeric_only=True)
+               .reset_index().itertuples() for f in FIGURES if np.isfinite(getattr(r, f))}
+    pooled_ece = {f"{name}/ece_all_levels": calibration.ece(group) for name, group in pooled.groupby("localizer", sort=False)}
+    return metrics | {k: float(v) for k, v in pooled_ece.items() if np.isfinite(v)}

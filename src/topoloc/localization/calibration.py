@@ -18,6 +18,8 @@ starts (summed) equal those of all their answers pooled.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
@@ -61,6 +63,12 @@ def reliability(rows: pd.DataFrame | dict[str, float], bins: int = BINS) -> pd.D
     with np.errstate(invalid="ignore", divide="ignore"):
         return pd.DataFrame({"low": np.arange(bins) / bins, "high": np.arange(1, bins + 1) / bins, "answers": n.astype(np.int64),
                              "confidence": np.where(n > 0, conf / n, np.nan), "share_right": np.where(n > 0, right / n, np.nan)})
+
+
+def reliability_per(rows: pd.DataFrame, by: str = "localizer", skip: Sequence[str] = ()) -> dict[str, pd.DataFrame]:
+    """The reliability diagram of each group of ``rows`` (bin sums of starts) by the column ``by``, in the order the
+    groups first appear, but those named in ``skip`` (the oracle, which gives no answers)."""
+    return {str(name): reliability(group) for name, group in rows.groupby(by, sort=False) if name not in skip}
 
 
 def ece(rows: pd.DataFrame | dict[str, float], bins: int = BINS) -> float:

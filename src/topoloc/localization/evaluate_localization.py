@@ -177,7 +177,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     with atomic_path(outputs["csv"]) as tmp:
         summary.to_csv(tmp, index=False, float_format="%.4f")
     write_text(outputs["table"], markdown(summary, first_table, conf.get("region", ""), ev, starts))
-    diagrams = {label(n): calibration.reliability(g) for n, g in starts.groupby("localizer", sort=False) if n != ORACLE}
+    diagrams = {label(n): d for n, d in calibration.reliability_per(starts, skip=[ORACLE]).items()}
     plot_reliability(diagrams, outputs["reliability"],
                      f"{conf.get('region', '')}: reliability of the answers' confidence, all starts and drives")
     plot_cdf(starts, {n: label(n) for n in starts.localizer.unique()}, outputs["cdf"],

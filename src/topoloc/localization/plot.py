@@ -3,6 +3,7 @@ hypotheses, every localizer's path) and the distribution of the distance to loca
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -139,7 +140,7 @@ def plot_reliability(diagrams: dict[str, pd.DataFrame], path: str | Path, title:
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1.02)
     ax.set_ylabel("share of answers right")
-    ax.set_title(title, fontsize=9)
+    ax.set_title(textwrap.fill(title, 80), fontsize=9)
     ax.legend(fontsize=7, loc="upper left")
     counts.set_yscale("symlog")
     counts.set_xlabel("confidence of the answer")
