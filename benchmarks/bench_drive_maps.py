@@ -49,9 +49,10 @@ from topoloc.drive.controller_training import fit
 from topoloc.drive.demonstrations import Demonstrations, collect_demonstrations, demonstrate_route
 from topoloc.drive.junctions import NOT_REACHED, TAKEN, junction_results, roundabout_ways, route_junctions
 from topoloc.drive.on_policy import check_metrics, check_route
-from topoloc.drive.routes import make_simulator, random_drive_route, teach_route
+from topoloc.drive.routes import make_simulator, teach_route
 from topoloc.drive.simulator import OUTCOMES
 from topoloc.drive.topo_lp import CONTROLLERS
+from topoloc.drive.turn_routes import TrainingRoutes
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
 
@@ -75,7 +76,7 @@ def _map(name: str) -> tuple[Any, Any, Any]:
         osm = next((str(p) for p in sorted((root / "osm").glob("region.*")) if p.suffix != ".json"), None)
         length = float(conf["drive"]["demonstrations"]["route_length_m"])
         _STATE["loaded"][name] = (teach_route(graph, conf).xy,
-                                  lambda rng, g=graph: random_drive_route(g, conf, length, rng),
+                                  TrainingRoutes(graph, conf, length),
                                   lambda route, g=graph, o=osm: make_simulator(o, g, route, conf))
         _STATE["graphs"][name] = (graph, osm)
     return _STATE["loaded"][name]

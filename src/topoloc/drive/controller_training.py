@@ -27,8 +27,9 @@ from topoloc.drive.controller import TopoDLM, waypoint_targets
 from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.local_path import lane_frame_path, path_plane
 from topoloc.drive.on_policy import DaggerSettings, closed_loop_check, collect
-from topoloc.drive.routes import make_simulator, random_drive_route, teach_route
+from topoloc.drive.routes import make_simulator, teach_route
 from topoloc.drive.topo_lp import CONTROLLERS
+from topoloc.drive.turn_routes import TrainingRoutes
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.place.topometric_map import COMMANDS
@@ -176,7 +177,7 @@ def _route_makers(conf: dict[str, Any], inputs: dict[str, str]) -> tuple[Any, An
     graph = RoadGraph.load(inputs["graph"])
     osm = inputs.get("osm")
     length = float(conf["drive"]["demonstrations"]["route_length_m"])
-    return (teach_route(graph, conf).xy, lambda rng: random_drive_route(graph, conf, length, rng),
+    return (teach_route(graph, conf).xy, TrainingRoutes(graph, conf, length),
             lambda route: make_simulator(osm, graph, route, conf))
 
 

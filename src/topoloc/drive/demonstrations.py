@@ -29,6 +29,7 @@ from topoloc.drive.drive_route import DriveRoute
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseInjector, NoiseSettings
 from topoloc.drive.lane_geometry import DENSE_M, lane_curvature
 from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, VehicleState
+from topoloc.drive.turn_routes import SHARP_TURN_DEG
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
@@ -222,12 +223,22 @@ def wide_middle_route(r: int, share: float) -> bool:
     return int(np.floor((r + 1) * share)) > int(np.floor(r * share))
 
 
+def sharp_turn_route(r: int, share: float) -> bool:
+    """Whether training route ``r`` is one of the ``share`` of the routes, spread evenly over the indices (half a
+    period after :func:`wide_middle_route`'s), drawn through one of the map's sharp turns
+    (``drive.demonstrations.sharp_turn_share``, :mod:`topoloc.drive.turn_routes`)."""
+    return int(np.floor((r + 1) * share + 0.5)) > int(np.floor(r * share + 0.5))
+
+
 def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None, make_route: Any,
-                   stream: int = 41, candidates: int = 1, wide_middle_share: float = 0.0) -> DriveRoute:
+                   stream: int = 41, candidates: int = 1, wide_middle_share: float = 0.0,
+                   sharp_turn_share: float = 0.0) -> DriveRoute:
     """Training route ``r``: of its seeded draws ``make_route(rng)`` that keep ``min_steps`` recorded steps
     ``min_distance_m`` away from ``avoid_xy``, the first ``candidates`` ones, and of those the one with the most lane
     in sharp bends (:func:`sharp_m`; the same route on every call: DAgger drives the demonstrations' routes; another
-    ``stream`` draws other routes the same way). When :func:`wide_middle_route` picks ``r`` for
+    ``stream`` draws other routes the same way). When :func:`sharp_turn_route` picks ``r`` for ``sharp_turn_share``,
+    the draws are ``make_route.through_turn(rng)`` (:class:`topoloc.drive.turn_routes.TrainingRoutes`; on a map
+    without sharp turns the others, with a warning); else when :func:`wide_middle_route` picks ``r`` for
     ``wide_middle_share``, only draws with at least :data:`WIDE_MIDDLE_MIN` of their lane in the middle of a wide
     unmarked carriageway count (:attr:`DriveRoute.wide_middle_share`; if no draw has that, the others, with a warning).
     InputError naming ``drive.lane.max_shared_m`` when no draw gave a route, ``drive.demonstrations.min_distance_m``
@@ -236,11 +247,18 @@ def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] |
     demo_conf = drive["demonstrations"]
     every = int(demo_conf.get("record_every", 1))
     step_m = float(drive["expert"]["cruise_mps"]) / float(drive["episode"]["control_hz"])
-    wide = wide_middle_route(r, float(wide_middle_share))
+    draw = make_route
+    if sharp_turn_route(r, float(sharp_turn_share)):
+        if getattr(make_route, "turns", None):
+            draw = make_route.through_turn
+        else:
+            log.warning("training route %d: the map has no turn of %.0f deg or more for "
+                        "drive.demonstrations.sharp_turn_share; drawn as the others", r, SHARP_TURN_DEG)
+    wide = draw is make_route and wide_middle_route(r, float(wide_middle_share))
     drawn, kept, other = 0, [], []
-    attempts = (WIDE_MIDDLE_ATTEMPTS if wide else 20) * int(candidates)
+    attempts = (WIDE_MIDDLE_ATTEMPTS if wide or draw is not make_route else 20) * int(candidates)
     for attempt in range(attempts):
-        route = make_route(np.random.default_rng([int(drive["seed"]), stream, r, attempt]))
+        route = draw(np.random.default_rng([int(drive["seed"]), stream, r, attempt]))
         if route is None:
             continue
         drawn += 1
@@ -281,7 +299,8 @@ def demonstrate_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64
     color = bool(conf["place"]["image"]["color"])
     side = SideViews(int(demo_conf["side_views"]), float(demo_conf["side_lateral_m"]), float(demo_conf["side_yaw_deg"]))
     chosen = training_route(r, conf, avoid_xy, make_route, candidates=int(demo_conf["candidates"]),
-                            wide_middle_share=float(demo_conf.get("wide_middle_share", 0.0)))
+                            wide_middle_share=float(demo_conf.get("wide_middle_share", 0.0)),
+                            sharp_turn_share=float(demo_conf.get("sharp_turn_share", 0.0)))
     sim = make_simulator(chosen)
     expert = Expert(chosen, sim.spec, ExpertSettings.from_conf(drive["expert"]))
     parts, outcomes, injected = [], [], []
@@ -328,7 +347,9 @@ def collect_demonstrations(parts: list[Demonstrations], outcomes: list[str], inj
              "mean_speed_mps": float(demos.speed.mean()),
              "mean_abs_lateral_m": float(np.abs(demos.lateral).mean()),
              "wide_middle_routes": float(sum(wide_middle_route(r, float(demo_conf.get("wide_middle_share", 0.0)))
-                                             for r in range(int(demo_conf["routes"]))))}
+                                             for r in range(int(demo_conf["routes"])))),
+             "sharp_turn_routes": float(sum(sharp_turn_route(r, float(demo_conf.get("sharp_turn_share", 0.0)))
+                                            for r in range(int(demo_conf["routes"]))))}
     facts |= {f"steps_{name}": float(np.sum(demos.command == i)) for i, name in
               enumerate(("follow", "left", "right", "straight"))}
     if avoid_xy is not None:

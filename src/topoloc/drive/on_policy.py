@@ -138,7 +138,8 @@ def collect(controller: Any, agent: str, conf: dict[str, Any], round_index: int,
     parts, outcomes, taken = [], [], []
     for r in tqdm(range(routes), desc=f"DAgger round {round_index + 1}", unit="route"):
         route = training_route(r, conf, avoid_xy, make_route, candidates=int(demo_conf["candidates"]),
-                               wide_middle_share=float(demo_conf.get("wide_middle_share", 0.0)))
+                               wide_middle_share=float(demo_conf.get("wide_middle_share", 0.0)),
+                               sharp_turn_share=float(demo_conf.get("sharp_turn_share", 0.0)))
         sim = make_simulator(route)
         expert = Expert(route, sim.spec, expert_settings)
         for c in route_conditions(r, len(conditions), demo_conf.get("conditions_per_route")):

@@ -69,13 +69,27 @@ def random_drive_route(graph: RoadGraph, conf: dict[str, Any], length_m: float, 
         if edges[i] == edges[i - 1]:  # turned back at a dead end
             edges, froms = edges[:i], froms[:i]
             break
+    return drive_route_of_walk(graph, conf, edges, froms, length_m)
+
+
+def drive_route_of_walk(graph: RoadGraph, conf: dict[str, Any], edges: list[int], froms: list[int],
+                        length_m: float, lead: tuple[int, float] | None = None) -> DriveRoute | None:
+    """The training route of a walk (roads and the node each is entered from), cut to ``length_m`` from its start, or
+    with ``lead`` = (road, metres) from that many metres before its lane first reaches that road; None when the walk
+    is under half of ``length_m``, its lane cannot be built, or it runs on other roads' carriageways for more than
+    ``drive.lane.max_shared_m``."""
     if not edges or float(graph.edges.length_m.iloc[edges].sum()) < 0.5 * length_m:
         return None
     try:
         route = route_of_edges(graph, edges, froms, conf)
     except InputError:
         return None
-    route = route.cut(length_m) if route.length_m > length_m else route
+    start = 0.0
+    if lead is not None:
+        reach = np.flatnonzero(route.edge == lead[0])
+        start = max(0.0, float(route.s[reach[0]]) - float(lead[1])) if len(reach) else 0.0
+    if start > 0.0 or route.length_m > length_m:
+        route = route.part(start, length_m)
     shared = conf["drive"]["lane"]["max_shared_m"]
     return None if shared is not None and route.shared_m > float(shared) else route
 

@@ -13,7 +13,8 @@ from typing import Any
 
 from topoloc.drive.demonstrations import demonstrate
 from topoloc.drive.plot import demonstrations_sheet
-from topoloc.drive.routes import make_simulator, random_drive_route, teach_route
+from topoloc.drive.routes import make_simulator, teach_route
+from topoloc.drive.turn_routes import TrainingRoutes
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import write_json
 
@@ -27,7 +28,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     evaluation = teach_route(graph, conf)
     length = float(conf["drive"]["demonstrations"]["route_length_m"])
     demos, facts = demonstrate(osm, graph, conf, evaluation.xy,
-                               lambda rng: random_drive_route(graph, conf, length, rng),
+                               TrainingRoutes(graph, conf, length),
                                lambda route: make_simulator(osm, graph, route, conf))
     demos.save(outputs["demonstrations"])
     write_json(outputs["stats"], facts)
