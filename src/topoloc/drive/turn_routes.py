@@ -24,6 +24,7 @@ import numpy as np
 from topoloc.drive.routes import drive_route_of_walk, random_drive_route
 from topoloc.drive.drive_route import DriveRoute
 from topoloc.graph.road_graph import RoadGraph
+from topoloc.trajectory.drives import Walker
 
 #: A way through the map that turns at least this much (degrees, either side) is a sharp turn.
 SHARP_TURN_DEG = 135.0
@@ -62,21 +63,17 @@ def _heading(coords: np.ndarray, at_end: bool) -> float:
 
 
 class _Ways:
-    """The legal moves of a road graph, both ways round: from a node (road, next node) and into it (road, previous
-    node)."""
+    """The legal moves of a road graph, both ways round: from a node (road, next node), as the training walks take
+    them (:class:`topoloc.trajectory.drives.Walker`), and into it (road, previous node)."""
 
     def __init__(self, graph: RoadGraph) -> None:
-        u, v = graph.edges.u.to_numpy(), graph.edges.v.to_numpy()
-        oneway = graph.edges.oneway.to_numpy()
-        self.out: dict[int, list[tuple[int, int]]] = {int(n): [] for n in graph.nodes.index}
-        self.into: dict[int, list[tuple[int, int]]] = {int(n): [] for n in graph.nodes.index}
-        for key, (a, b, ow) in enumerate(zip(u.tolist(), v.tolist(), oneway.tolist())):
-            if ow != -1:
-                self.out[a].append((key, b))
-                self.into[b].append((key, a))
-            if ow != 1 and a != b:
-                self.out[b].append((key, a))
-                self.into[a].append((key, b))
+        self.out = Walker(graph).options
+        self.into: dict[int, list[tuple[int, int]]] = {node: [] for node in self.out}
+        for node, moves in self.out.items():
+            for key, nxt in moves:
+                self.into[nxt].append((key, node))
+        for moves in self.into.values():
+            moves.sort()  # by road: the walks back draw from them in a fixed order
 
 
 def sharp_turns(graph: RoadGraph, min_turn_deg: float = SHARP_TURN_DEG,
