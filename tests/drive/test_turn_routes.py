@@ -4,13 +4,15 @@ share of training routes drawn so is spread over the route indices."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from tests.conftest import make_config
 from tests.drive.conftest import drive_conf, town_route
 from topoloc.drive.demonstrations import sharp_turn_route, training_route, wide_middle_route
-from topoloc.drive.turn_routes import SHARP_TURN_DEG, TrainingRoutes, sharp_turns
+from topoloc.drive.turn_routes import SHARP_TURN_DEG, TrainingRoutes, sharp_turns, turn_class
 from topoloc.odometry.map_errors import dual_carriageway_grid
 
 
@@ -34,6 +36,19 @@ def test_the_sharp_turns_of_a_dual_carriageway_are_its_u_turns_through_the_media
         assert [dual.other_end(k, n) for k, n in zip(t.edges[:-1], t.froms[:-1])] == list(t.froms[1:])
     # side streets leave at right angles: no sharp turn at a node, and none through a road longer than within_m
     assert sharp_turns(dual, within_m=10.0) == [] and sharp_turns(dual, min_turn_deg=90.0, within_m=0.0) != []
+
+
+def test_turns_are_drawn_evenly_by_class_not_by_number():
+    assert [turn_class(t) for t in (140.0, -150.0, 175.0, -185.0, 270.0)] == [
+        (0, True), (0, False), (1, True), (1, False), (2, True)]
+    graph = dual_carriageway_grid().truth
+    routes = TrainingRoutes(graph, make_config(), 300.0)
+    loops = [replace(t, turn_deg=270.0) for t in routes.turns[:9]]  # nine "loops" and one U-turn
+    routes.__dict__["turns"] = loops + routes.turns[9:]
+    firsts = [routes.through_turn(np.random.default_rng(seed)) for seed in range(40)]
+    u_turn = routes.turns[9].edges[1]
+    share = np.mean([r is not None and u_turn in r.edges for r in firsts])
+    assert share > 0.3  # drawn evenly by class: about half, where by number it would be a tenth
 
 
 def test_a_route_through_a_turn_turns_back_within_it(dual):
@@ -60,11 +75,13 @@ def test_sharp_turn_share_draws_that_share_of_the_routes_through_a_turn(town_gra
 
     class Maker:  # straight on when called, the right turn through a "sharp turn"
         turns = ["a turn"]
+        through = 0
 
         def __call__(self, rng):
             return straight
 
         def through_turn(self, rng):
+            Maker.through += 1
             return right
 
     routes = 9
@@ -73,6 +90,10 @@ def test_sharp_turn_share_draws_that_share_of_the_routes_through_a_turn(town_gra
         picked = [r for r in range(routes) if sharp_turn_route(r, share)]
         assert len(picked) == round(routes * share)
         assert all(chosen[r] is right for r in picked) and all(chosen[r] is straight for r in range(routes) if r not in picked)
+    # a route through a turn is the first one kept: candidates rank random walks only
+    Maker.through = 0
+    assert training_route(1, conf, None, Maker(), candidates=4, sharp_turn_share=1.0 / 3.0) is right
+    assert Maker.through == 1
     # spread half a period after wide_middle_share's routes, so that equal shares pick other routes
     assert [r for r in range(routes) if sharp_turn_route(r, 1.0 / 3.0)] == [1, 4, 7]
     assert not {1, 4, 7} & {r for r in range(routes) if wide_middle_route(r, 1.0 / 3.0)}

@@ -238,7 +238,7 @@ def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] |
     in sharp bends (:func:`sharp_m`; the same route on every call: DAgger drives the demonstrations' routes; another
     ``stream`` draws other routes the same way). When :func:`sharp_turn_route` picks ``r`` for ``sharp_turn_share``,
     the draws are ``make_route.through_turn(rng)`` (:class:`topoloc.drive.turn_routes.TrainingRoutes`; on a map
-    without sharp turns the others, with a warning); else when :func:`wide_middle_route` picks ``r`` for
+    without sharp turns the others, with a warning), and the first kept is the route; else when :func:`wide_middle_route` picks ``r`` for
     ``wide_middle_share``, only draws with at least :data:`WIDE_MIDDLE_MIN` of their lane in the middle of a wide
     unmarked carriageway count (:attr:`DriveRoute.wide_middle_share`; if no draw has that, the others, with a warning).
     InputError naming ``drive.lane.max_shared_m`` when no draw gave a route, ``drive.demonstrations.min_distance_m``
@@ -255,6 +255,8 @@ def training_route(r: int, conf: dict[str, Any], avoid_xy: NDArray[np.float64] |
             log.warning("training route %d: the map has no turn of %.0f deg or more for "
                         "drive.demonstrations.sharp_turn_share; drawn as the others", r, SHARP_TURN_DEG)
     wide = draw is make_route and wide_middle_route(r, float(wide_middle_share))
+    if draw is not make_route:
+        candidates = 1  # drawn through a chosen turn already: ranked by their bends, small loops would win
     drawn, kept, other = 0, [], []
     attempts = (WIDE_MIDDLE_ATTEMPTS if wide or draw is not make_route else 20) * int(candidates)
     for attempt in range(attempts):

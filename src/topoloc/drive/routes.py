@@ -6,7 +6,8 @@
 * **Training routes** are random walks (:func:`topoloc.motion.route.random_route`, one-way roads respected,
   cut where they turn back at a dead end) seeded by ``drive.seed``, the route index and the attempt; a walk whose lane
   runs on other roads' carriageways for more than ``drive.lane.max_shared_m`` is drawn again (the images could not
-  show which road to keep to).
+  show which road to keep to). A share of them may be drawn through the map's sharp turns instead
+  (:mod:`topoloc.drive.turn_routes`, ``drive.demonstrations.sharp_turn_share``).
 * A route's **simulator** renders the scene around its lane (``render.buildings``, ``render.view_distance_m``)
   with the controller's camera (:func:`topoloc.drive.camera.drive_rig`).
 """

@@ -8,7 +8,8 @@ the many ways on at a node. A controller never shown one does not take one. Here
   :data:`SHARP_TURN_WITHIN_M`: two roads at a node, or two roads and the short road between them (one-way roads
   respected; the heading change summed with its sign, so a U-turn counts 180 deg, not 0);
 * :class:`TrainingRoutes` draws a training route as :func:`topoloc.drive.routes.random_drive_route` does (called
-  with a generator), or through one of those turns chosen at random (:meth:`TrainingRoutes.through_turn`): a walk
+  with a generator), or through one of those turns (:meth:`TrainingRoutes.through_turn`: a class of
+  :func:`turn_class`, sharp, U-turn or more, left or right, drawn evenly, then one of its turns): a walk
   back from the turn, the turn, and a walk on from it (dead ends end a walk), its lane starting 20-50 % of the
   route's length before the turn's first node and checked as every training route's is.
 """
@@ -117,6 +118,17 @@ def sharp_turns(graph: RoadGraph, min_turn_deg: float = SHARP_TURN_DEG,
     return found + longer
 
 
+#: Classes of sharp turns by how far they turn (degrees): sharp, a U-turn, more (round a small loop).
+TURN_CLASS_DEG = (160.0, 200.0)
+
+
+def turn_class(turn_deg: float) -> tuple[int, bool]:
+    """The class of a sharp turn (:data:`TURN_CLASS_DEG`: 0 sharp, 1 U-turn, 2 more) and whether it turns left: a
+    route is drawn through each class alike, so the many small loops of a car park do not crowd out a dual
+    carriageway's few U-turns."""
+    return int(np.searchsorted(TURN_CLASS_DEG, abs(turn_deg))), bool(turn_deg > 0)
+
+
 def _walk(ways: dict[int, list[tuple[int, int]]], node: int, last: int, length_m: float, lengths: np.ndarray,
           rng: np.random.Generator) -> tuple[list[int], list[int]]:
     """A random walk from ``node`` over ``ways`` (roads out of a node, or into it for a walk backwards) of at least
@@ -155,12 +167,21 @@ class TrainingRoutes:
     def _ways(self) -> _Ways:
         return _Ways(self.graph)
 
+    @cached_property
+    def _classes(self) -> list[list[SharpTurn]]:
+        groups: dict[tuple[int, bool], list[SharpTurn]] = {}
+        for turn in self.turns:
+            groups.setdefault(turn_class(turn.turn_deg), []).append(turn)
+        return [groups[key] for key in sorted(groups)]
+
     def through_turn(self, rng: np.random.Generator) -> DriveRoute | None:
-        """A route through one of the map's sharp turns, drawn at random; None where the map has none, or the drawn
-        one gives no drivable route (as :func:`topoloc.drive.routes.random_drive_route`)."""
+        """A route through one of the map's sharp turns: a class of :func:`turn_class` drawn evenly among those the
+        map has, then one of its turns; None where the map has none, or the drawn one gives no drivable route (as
+        :func:`topoloc.drive.routes.random_drive_route`)."""
         if not self.turns:
             return None
-        turn = self.turns[int(rng.integers(len(self.turns)))]
+        group = self._classes[int(rng.integers(len(self._classes)))]
+        turn = group[int(rng.integers(len(group)))]
         lengths = self.graph.edges.length_m.to_numpy(float)
         before_m = float(rng.uniform(0.2, 0.5)) * self.length_m
         back, back_to = _walk(self._ways.into, turn.froms[0], turn.edges[0], before_m, lengths, rng)
