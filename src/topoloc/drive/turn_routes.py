@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from topoloc.drive.routes import drive_route_of_walk, random_drive_route
 from topoloc.drive.drive_route import DriveRoute
+from topoloc.drive.routes import drive_route_of_walk, random_drive_route
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.trajectory.drives import Walker
 
@@ -91,8 +91,8 @@ def sharp_turns(graph: RoadGraph, min_turn_deg: float = SHARP_TURN_DEG,
             ends[(key, start)] = (_heading(coords, False), _heading(coords, True))
         return ends[(key, start)]
 
-    def bend(a: int, a_from: int, b: int, node: int) -> float:  # the turn at ``node`` from a into b, with b's own
-        return _wrap((headings(b, node)[0] - headings(a, a_from)[1]))
+    def bend(a: int, a_from: int, b: int, node: int) -> float:  # at ``node``, from a's last metres to b's first
+        return _wrap(headings(b, node)[0] - headings(a, a_from)[1])
 
     found: list[SharpTurn] = []
     longer: list[SharpTurn] = []
@@ -108,7 +108,7 @@ def sharp_turns(graph: RoadGraph, min_turn_deg: float = SHARP_TURN_DEG,
                     continue
                 if length[b] > within_m:
                     continue
-                inner = _wrap((headings(b, node)[1] - headings(b, node)[0]))
+                inner = _wrap(headings(b, node)[1] - headings(b, node)[0])  # b's own bend
                 for c, _ in ways.out[b_end]:
                     if c in (a, b):
                         continue
