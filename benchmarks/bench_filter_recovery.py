@@ -154,9 +154,9 @@ def run(conf: dict, graph: RoadGraph, level: str, n_drives: int, seed: int, star
             fr = np.asarray(obs.frame)
             st = np.asarray(track.state)
             conf_ = np.asarray(track.confidence)
-            right = np.zeros(len(fr), bool)
             m = on[fr]
-            right[m] = judge.right(st[m], edge[fr][m], xy[fr][m])
+            judged = judge.right(st, edge[fr], xy[fr])  # off the map "no road" is right (calibration) ...
+            right = judged & m  # ... but localized and confident wrong count on-map answers only
             dist = driven[fr] - driven[s]
             if s == rejoin:  # the fresh start at the return
                 step = localized_step(right, dist, ev["confirm_m"])
@@ -164,8 +164,6 @@ def run(conf: dict, graph: RoadGraph, level: str, n_drives: int, seed: int, star
             if s in extra:
                 continue
             cw = ~right & (conf_ >= ev["sure"])
-            # calibration over every answer, "no road" right where the drive is off the map
-            judged = judge.right(st, edge[fr], xy[fr])
             row = {"drive": d, "start": s, "steps": len(fr), "cw": cw.sum(), "cw_off": (cw & ~m).sum(),
                    **calibration.bin_sums(conf_, judged)}
             if rejoin is not None and s >= rejoin - 200 and s < rejoin:

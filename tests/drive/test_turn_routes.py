@@ -12,6 +12,7 @@ import pytest
 from tests.conftest import make_config
 from tests.drive.conftest import drive_conf, town_route
 from topoloc.drive.demonstrations import sharp_turn_route, training_route, wide_middle_route
+from topoloc.drive.routes import random_drive_route
 from topoloc.drive.turn_routes import SHARP_TURN_DEG, TrainingRoutes, sharp_turns, turn_class
 from topoloc.odometry.map_errors import dual_carriageway_grid
 
@@ -63,9 +64,11 @@ def test_a_route_through_a_turn_turns_back_within_it(dual):
         step = int(round(45.0 / float(np.median(np.diff(route.s)))))
         assert np.abs(heading[step:] - heading[:-step]).max() >= np.radians(SHARP_TURN_DEG)  # within 45 m
         assert any(e in route.edges for e in (18, 19, 20, 21, 22, 23))  # through a median opening
-    # a plain random walk is what calling it draws, the same as random_drive_route's
-    plain = routes(np.random.default_rng(0))
-    assert plain is None or plain.length_m <= 301.0
+    # called, it draws the plain random walk of random_drive_route
+    for seed in range(5):
+        plain = routes(np.random.default_rng(seed))
+        same = random_drive_route(dual, conf, 300.0, np.random.default_rng(seed))
+        assert (plain is None) == (same is None) and (plain is None or plain.edges == same.edges)
 
 
 def test_sharp_turn_share_draws_that_share_of_the_routes_through_a_turn(town_graph, caplog):
