@@ -9,14 +9,16 @@ from topoloc.graph.road_graph import EDGE_COLUMNS, RoadGraph
 
 
 def make_graph(coords: dict[int, tuple[float, float]], edges: list[tuple], spacing: float = 20.0) -> RoadGraph:
-    """Straight roads between ``coords``; ``edges`` are ``(u, v)`` or ``(u, v, oneway)`` (ids in order)."""
+    """Roads between ``coords``; ``edges`` are ``(u, v)``, ``(u, v, oneway)`` or ``(u, v, oneway, via)`` (ids in
+    order), straight or through the points ``via`` (a bend inside the road)."""
     nodes = pd.DataFrame({"x": [c[0] for c in coords.values()], "y": [c[1] for c in coords.values()],
                           "lon": 0.0, "lat": 0.0}, index=pd.Index(list(coords), name="node_id"))
     records, geometry = [], []
     for edge in edges:
-        u, v, oneway = (*edge, 0)[:3]
-        pts = np.array([coords[u], coords[v]], dtype=float)
-        length = float(np.hypot(*(pts[1] - pts[0])))
+        u, v = edge[:2]
+        oneway = edge[2] if len(edge) > 2 else 0
+        pts = np.array([coords[u], *(edge[3] if len(edge) > 3 else ()), coords[v]], dtype=float)
+        length = float(np.hypot(*np.diff(pts, axis=0).T).sum())
         geometry.append(pts)
         records.append((u, v, length, "residential", "", oneway, "1", 0, np.nan, np.nan))
     frame = pd.DataFrame(records, columns=EDGE_COLUMNS)

@@ -23,7 +23,10 @@ self-localization", CVPR 2013; PAMI 2016), on our cells (:mod:`topoloc.localizat
 * **Evidence**: the odometry's yaw against the map road's heading at the cell plus ``theta``:
   von Mises with the spread ``heading_sigma_deg`` (plus, on a turn chain, ``turn_sigma_share`` of
   the turn angle at the node, fading out towards the ends of the turn: vehicles round a corner
-  more or less widely than the modelled sweep), mixed with a uniform ``floor``. Curves therefore count as much as corners, and driving straight
+  more or less widely than the modelled sweep; with ``bend_spread``, the default, a bend inside a road, a
+  vertex of its polyline, widens it the same way, so a turn at a junction and the same bend inside a road
+  weigh alike), mixed with a uniform ``floor``; with ``turn_spread: tolerance`` the density keeps a straight
+  road's peak wherever it is widened. Curves therefore count as much as corners, and driving straight
   through an intersection gives no false turn. Each observation also sharpens ``theta``.
 * **Off the map**: the off-map state predicts the heading without a map: the last one plus the
   noise of two observations, or, with ``offmap_turn_prob``, anything (a turn). It wins where the

@@ -197,6 +197,30 @@ class CellGrid:
                 xy[cells] += lane_offset_m[s] * np.column_stack([np.sin(h), -np.cos(h)])
         return xy, heading
 
+    def bend_ramp(self, graph: RoadGraph, half: float) -> NDArray[np.float64]:
+        """Per cell, the turn of the bends inside its road (radians; a vertex of the road's polyline) weighed like a
+        turn chain's :attr:`turn_ramp`: each bend's signed angle, 1 at the vertex, 0 ``half`` metres from it, summed
+        (so a curve counts its turn within ``half`` metres, and a zigzag of a noisy polyline cancels), then absolute."""
+        ramp = np.zeros(self.num_cells)
+        order = np.argsort(self.state, kind="stable")
+        bounds = np.searchsorted(self.state[order], np.arange(self.states.num_states + 1))
+        for s in np.flatnonzero(np.diff(bounds)):
+            coords = state_coords(graph, int(s))
+            if len(coords) < 3:
+                continue
+            seg = np.diff(coords, axis=0)
+            length = np.hypot(*seg.T)
+            keep = length > 0.1  # repeated points turn nowhere
+            heading = np.arctan2(seg[keep, 1], seg[keep, 0])
+            if len(heading) < 2:
+                continue
+            angle = (np.diff(heading) + np.pi) % (2.0 * np.pi) - np.pi  # signed: a polyline's zigzag cancels out
+            at = np.cumsum(length)[keep][:-1]  # each bend: the end of the segment before it
+            cells = order[bounds[s]:bounds[s + 1]]
+            near = np.clip(1.0 - np.abs(self.state_offset[cells, None] - at[None, :]) / half, 0.0, 1.0)
+            ramp[cells] = np.abs(near @ angle)
+        return ramp
+
     def _ramp(self, since_node: NDArray[np.float64]) -> NDArray[np.float64]:
         """Per cell, the turn of its chain (radians) weighed by nearness to the node: 1 at the node, 0 at the
         ends of the turn (cells of middles: 0)."""

@@ -284,8 +284,9 @@ class MetricFilter:
         sample = complex(math.cos(yaw), math.sin(yaw)) * model.unheading[self.cell]  # e^{i (yaw - h)}: an offset sample
         cos_delta = (sample * mean.conj()).real
         kappa_eff = kappa * kappa_obs / (kappa + kappa_obs)  # the predicted offset and the observation, convolved
+        norm = kappa_eff if model.norm_kappa is None else kappa * model.norm_kappa / (kappa + model.norm_kappa)
         inlier = ((1.0 - self.settings.floor) * np.exp(kappa_eff * (cos_delta - 1.0))
-                  * np.sqrt(kappa_eff / TWO_PI + 1.0 / TWO_PI**2))  # von Mises density, normaliser approximated
+                  * np.sqrt(norm / TWO_PI + 1.0 / TWO_PI**2))  # von Mises density, normaliser approximated
         like = inlier + model.floor_density
         natural = kappa * mean + (inlier / like) * kappa_obs * sample  # the inlier share of the observation
         self.kappa = np.abs(natural)

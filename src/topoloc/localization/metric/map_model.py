@@ -23,7 +23,8 @@ from topoloc.localization.metric.lane_chains import lane_chains
 
 TWO_PI = 2.0 * math.pi
 INT_SETTINGS = ("scale_classes", "coarse_factor", "coarse_min_cells", "coarse_handoff_cells")
-STR_SETTINGS = ("branches", "u_turns", "turn_path")
+STR_SETTINGS = ("branches", "u_turns", "turn_path", "turn_spread")
+BOOL_SETTINGS = ("bend_spread",)
 
 
 @dataclass(frozen=True)
@@ -56,12 +57,14 @@ class MetricSettings:
     turn_path: str = "node"
     wide_zone_m: float = 0.0
     lateral_offset_m: float = 0.0
+    turn_spread: str = "density"
+    bend_spread: bool = True
 
     @classmethod
     def from_conf(cls, conf: dict) -> MetricSettings:
         """The settings of the validated config slice ``localization.metric``."""
-        return cls(**{k: (str if k in STR_SETTINGS else int if k in INT_SETTINGS else float)(conf[k])
-                      for k in cls.__dataclass_fields__})
+        return cls(**{k: (str if k in STR_SETTINGS else int if k in INT_SETTINGS else bool if k in BOOL_SETTINGS
+                          else float)(conf[k]) for k in cls.__dataclass_fields__})
 
 
 def _transitions(grid: CellGrid, distance_m: float, split: bool = True) -> sp.csr_matrix:
@@ -92,8 +95,13 @@ class MetricModel:
         self.backward = (sp.diags(1.0 / np.maximum(norm, 1e-12)) @ back).tocsr().astype(np.float32)
         self.forward_cols, self.backward_cols = self.forward.T.tocsr(), self.backward.T.tocsr()
         sigma = np.radians(settings.heading_sigma_deg)
-        turning = settings.turn_sigma_share * grid.turn_ramp  # how a vehicle turns varies: the more, the sharper the turn
+        ramp = grid.turn_ramp
+        if settings.bend_spread:  # a bend inside a road is driven as loosely as a turn through a node
+            ramp = np.maximum(ramp, grid.bend_ramp(graph, settings.turn_zone_m))
+        turning = settings.turn_sigma_share * ramp  # how a vehicle turns varies: the more, the sharper the turn
         self.kappa_obs = (1.0 / (sigma**2 + turning**2)).astype(np.float32)  # von Mises concentration of one observation
+        # ``tolerance``: the density's normaliser stays that of a straight road's spread; ``density``: the wider one's
+        self.norm_kappa = np.float32(1.0 / sigma**2) if settings.turn_spread == "tolerance" else None
         self.unheading = np.exp(-1j * np.radians(grid.heading)).astype(np.complex64)  # e^{-i h}: a yaw into an offset
         drift = float(np.radians(settings.offset_drift_deg) ** 2 * settings.cell_m / 100.0)  # variance per step
         # through a node the offset may jump (each road's map heading errs its own way): spread over the turn chain
