@@ -195,7 +195,7 @@ def test_a_turn_at_a_junction_weighs_as_much_as_the_same_bend_inside_a_road():
 
     at_junction = [[1010.0, 0.0], [1100.0, 0.0], [1100.0, 90.0]]
     # a priori the junction's walk has half the bend's (its probability splits between two ways on); the evidence
-    # for it is 0.89 of the bend's (defaults), 0.76 with tolerance, 0.02 without bend_spread
+    # for it is 0.91 of the bend's (defaults), 0.76 with tolerance, 0.02 without bend_spread
     for metric in ({}, {"turn_spread": "tolerance"}):
         mass = last_places(at_junction, **metric)
         assert mass.get(2, 0.0) >= 0.3 * mass.get(0, 0.0), (metric, mass)
