@@ -31,6 +31,7 @@ metric filter) build their transitions from it.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -179,15 +180,19 @@ class CellGrid:
     def _stretch(self) -> NDArray[np.float64] | float:
         return 1.0 if self.chains.stretch is None else self.chains.stretch[self.chain]
 
+    def _cells_by_state(self) -> Iterator[tuple[int, NDArray[np.int64]]]:
+        """Each directed edge that has cells, with its cells."""
+        order = np.argsort(self.state, kind="stable")
+        bounds = np.searchsorted(self.state[order], np.arange(self.states.num_states + 1))
+        for s in np.flatnonzero(np.diff(bounds)):
+            yield int(s), order[bounds[s]:bounds[s + 1]]
+
     def _geometry(self, graph: RoadGraph, half: float,
                   lane_offset_m: NDArray[np.float64] | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         xy = np.empty((self.num_cells, 2))
         heading = np.empty(self.num_cells)
-        order = np.argsort(self.state, kind="stable")
-        bounds = np.searchsorted(self.state[order], np.arange(self.states.num_states + 1))
-        for s in np.flatnonzero(np.diff(bounds)):
-            cells = order[bounds[s]:bounds[s + 1]]
-            coords = state_coords(graph, int(s))
+        for s, cells in self._cells_by_state():
+            coords = state_coords(graph, s)
             pos = self.state_offset[cells]
             cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(coords, axis=0).T))])
             xy[cells] = np.column_stack([np.interp(pos, cum, coords[:, 0]), np.interp(pos, cum, coords[:, 1])])
@@ -202,10 +207,8 @@ class CellGrid:
         turn chain's :attr:`turn_ramp`: each bend's signed angle, 1 at the vertex, 0 ``half`` metres from it, summed
         (so a curve counts its turn within ``half`` metres, and a zigzag of a noisy polyline cancels), then absolute."""
         ramp = np.zeros(self.num_cells)
-        order = np.argsort(self.state, kind="stable")
-        bounds = np.searchsorted(self.state[order], np.arange(self.states.num_states + 1))
-        for s in np.flatnonzero(np.diff(bounds)):
-            coords = state_coords(graph, int(s))
+        for s, cells in self._cells_by_state():
+            coords = state_coords(graph, s)
             if len(coords) < 3:
                 continue
             seg = np.diff(coords, axis=0)
@@ -216,7 +219,6 @@ class CellGrid:
                 continue
             angle = (np.diff(heading) + np.pi) % (2.0 * np.pi) - np.pi  # signed: a polyline's zigzag cancels out
             at = np.cumsum(length)[keep][:-1]  # each bend: the end of the segment before it
-            cells = order[bounds[s]:bounds[s + 1]]
             near = np.clip(1.0 - np.abs(self.state_offset[cells, None] - at[None, :]) / half, 0.0, 1.0)
             ramp[cells] = np.abs(near @ angle)
         return ramp
