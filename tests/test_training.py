@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import lightning as L
 import numpy as np
 import torch
@@ -114,9 +116,15 @@ def test_fit_logs_metrics_and_model_to_the_stage_run(tmp_path, monkeypatch):
         models = mlflow.search_logged_models(experiment_ids=[logged.info.experiment_id], output_format="list")
         assert [m.source_run_id for m in models] == [run.run_id]
         signature = mlflow.models.get_model_info(f"models:/{models[0].model_id}").signature
+        requirements = Path(mlflow.pyfunc.get_model_dependencies(f"models:/{models[0].model_id}")).read_text().split()
+        loaded = mlflow.pytorch.load_model(f"models:/{models[0].model_id}")
     finally:
         mlflow.set_tracking_uri(None)
     assert signature.inputs.inputs[0].shape == (-1, 3) and signature.outputs.inputs[0].shape == (-1, 1)
+    # pinned to what is installed (named, not inferred by loading the model again), and it loads
+    assert f"torch=={torch.__version__.split('+')[0]}" in requirements
+    assert {r.split("==")[0] for r in requirements} >= {"torch", "lightning", "numpy"}
+    assert torch.allclose(loaded(torch.as_tensor(example)), result.module(torch.as_tensor(example)))
 
 
 def test_fast_dev_run_writes_the_last_state(tmp_path):

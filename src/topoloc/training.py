@@ -38,6 +38,10 @@ from topoloc.tracking import tracking_uri
 
 #: The metric that picks the checkpoint (and drives early stopping).
 MONITOR = "val/loss"
+#: What loading a logged model imports (the module's class is topoloc's, pickled): its requirements, pinned to the
+#: installed versions. Named here because MLflow's own inference loads the model again in a subprocess, 15-60 s per
+#: model, and found these.
+MODEL_DISTRIBUTIONS = ("torch", "lightning", "numpy", "pandas", "scipy", "matplotlib", "cloudpickle")
 TRAIN_LOSS = "train/loss"
 VAL_PREFIX = "val/"
 
@@ -212,7 +216,22 @@ def log_model(module: L.LightningModule, logged: LoggedModel) -> None:
         inputs=Schema([TensorSpec(logged.example.dtype, free + logged.example.shape[logged.free_axes:])]),
         outputs=Schema([TensorSpec(output.dtype, free + output.shape[logged.free_axes:])]),
     )
-    mlflow.pytorch.log_model(module, name="model", signature=signature, input_example=logged.example)
+    mlflow.pytorch.log_model(module, name="model", signature=signature, input_example=logged.example,
+                             pip_requirements=model_requirements())
+
+
+def model_requirements() -> list[str]:
+    """The pinned pip requirements of a logged model: :data:`MODEL_DISTRIBUTIONS` at their installed versions
+    (without a local label such as torch's ``+cpu``, as MLflow writes them)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    pins = []
+    for dist in MODEL_DISTRIBUTIONS:
+        try:
+            pins.append(f"{dist}=={version(dist).split('+')[0]}")
+        except PackageNotFoundError:
+            continue
+    return pins
 
 
 @contextmanager

@@ -119,6 +119,12 @@ def workflow(tmp_path) -> Workflow:
                             "batch_size": 8, "batches_per_epoch": 4, "max_epochs": 1, "max_time_min": 0.5,
                             "val_pairs": 16},
                   "network": {"channels": [8, 16], "embedding_dim": 16, "hidden": 32}},
+        # the drive stages end to end: three demonstration routes, controllers of 8 small batches (they barely move,
+        # so every drive lasts until its timeout: 60 m routes), no closed-loop check after training
+        "drive": {"demonstrations": {"routes": 3},
+                  "network": {"channels": [8, 16], "hidden": 32},
+                  "train": {"batch_size": 16, "batches_per_epoch": 4, "max_epochs": 2, "log_every_n_steps": 1},
+                  "check": {"routes": 0}, "follow": {"length_m": 60}},
     })
     config_path.write_text(yaml.safe_dump(config, sort_keys=False))
     return Workflow(root)
