@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from topoloc.config import load
+
+if os.environ.get("PYTEST_XDIST_WORKER"):  # test processes share the cores: one thread each, or torch's spin
+    os.environ.setdefault("OMP_NUM_THREADS", "1")  # (and the stages' subprocesses') oversubscribe them
+    os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 REPO = Path(__file__).resolve().parents[1]
 KITTI00 = REPO.parent / "shared" / "data" / "kitti00"
@@ -51,3 +56,9 @@ def write_osm(path: Path, nodes: dict[int, tuple[float, float]], ways: list[tupl
     lines.append("</osm>")
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The slow files first, the whole pipeline's the very first: the test processes take a file each in this
+    order, so the longest start early and the short ones fill in around them."""
+    items.sort(key=lambda item: (item.get_closest_marker("slow") is None, item.path.name != "test_map_stages.py"))
