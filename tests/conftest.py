@@ -56,9 +56,3 @@ def write_osm(path: Path, nodes: dict[int, tuple[float, float]], ways: list[tupl
     lines.append("</osm>")
     path.write_text("\n".join(lines) + "\n")
     return path
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The slow files first, the whole pipeline's the very first: the test processes take a file each in this
-    order, so the longest start early and the short ones fill in around them."""
-    items.sort(key=lambda item: (item.get_closest_marker("slow") is None, item.path.name != "test_map_stages.py"))
