@@ -10,8 +10,10 @@ import pytest
 
 from topoloc.config import load
 
-if os.environ.get("PYTEST_XDIST_WORKER"):  # test processes share the cores: one thread each, or torch's spin
-    os.environ.setdefault("OMP_NUM_THREADS", "1")  # (and the stages' subprocesses') oversubscribe them
+# Test processes (pytest-xdist) share the cores: one thread each, for torch and the stages' subprocesses alike;
+# two processes of two torch threads on two cores made a training test three times slower.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
     os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 REPO = Path(__file__).resolve().parents[1]

@@ -39,8 +39,8 @@ from topoloc.tracking import tracking_uri
 #: The metric that picks the checkpoint (and drives early stopping).
 MONITOR = "val/loss"
 #: What loading a logged model imports (the module's class is topoloc's, pickled): its requirements, pinned to the
-#: installed versions. Named here because MLflow's own inference loads the model again in a subprocess, 15-60 s per
-#: model, and found these.
+#: installed versions. Named here because MLflow's own inference loads the model again in a subprocess (about 15 s
+#: per model on a 2-core machine), and found these.
 MODEL_DISTRIBUTIONS = ("torch", "lightning", "numpy", "pandas", "scipy", "matplotlib", "cloudpickle")
 TRAIN_LOSS = "train/loss"
 VAL_PREFIX = "val/"
