@@ -113,6 +113,17 @@ def test_coarse_phase_hands_over_and_back(grid):
     assert not sure[-50:].any()
 
 
+@pytest.mark.parametrize("cells, share", [(400, 1.0), (100000, 0.125), (100000, 0.5), (300, 0.125)])
+def test_handoff_is_the_fewer_of_its_cells_and_its_share_of_the_map(grid, cells, share):
+    graph, road, conf = grid
+    metric = coarse_conf(conf, cells)["localization"]["metric"]
+    settings = MetricSettings.from_conf({**metric, "coarse_handoff_share": share})
+    fine = MetricModel(graph, road.states, settings)
+    bank = CityFilter(fine, MetricModel(graph, road.states, coarse_settings(settings)))
+    assert bank.handoff == int(min(cells, share * fine.num_cells)) // settings.coarse_factor  # in coarse entries
+    assert MetricSettings.from_conf(load(None)["localization"]["metric"]).coarse_handoff_share == 1.0  # off: the cells alone
+
+
 def test_handed_over_belief_is_the_coarse_one_at_that_step(grid):
     """A coarse belief handed over stands for the position after the step that handed it over: the fine filter
     must not take that step a second time (which would move the mass one fine cell ahead of the coarse one)."""

@@ -9,7 +9,8 @@ fine steps (net, so reversing counts back), with the yaw at that moment; ``coars
 ``coarse_spread``, the distance jitter scaled to the same variance per metre, no scale classes); with one
 observation per coarse cell it already tells roads apart less sharply per metre than the full grid, so the
 default spread is 1 and the coarse phase is kept short. Once the coarse belief of a filter holds at most
-``coarse_handoff_cells`` positions (counted in fine cells), it is handed to the fine filter at a coarse
+``coarse_handoff_cells`` positions (counted in fine cells), or ``coarse_handoff_share`` of the map's cells where
+that is fewer, it is handed to the fine filter at a coarse
 step: each coarse entry's mass is spread over the fine cells it covers (by their length), with its heading
 offset belief; from there the filter is the dense one (:class:`~topoloc.localization.metric.dense_filter.MetricFilter`).
 A fine filter that gets lost (more likely off the map than on it) goes back to the coarse phase with its
@@ -60,7 +61,9 @@ class CityFilter:
         if coarse is None:
             return
         self.factor = int(fine.settings.coarse_factor)
-        self.handoff = max(1, int(fine.settings.coarse_handoff_cells) // self.factor)  # in coarse entries
+        settings = fine.settings
+        handoff = min(settings.coarse_handoff_cells, settings.coarse_handoff_share * fine.num_cells)  # in fine cells
+        self.handoff = max(1, int(handoff) // self.factor)  # in coarse entries
         self.level, self.coarse_level = 0, 0  # net fine steps driven, and net coarse steps
         fg, cg = fine.grid, coarse.grid
         index = np.floor(fg.offset / np.maximum(cg.cell_len[fg.chain], TINY)).astype(np.int64)

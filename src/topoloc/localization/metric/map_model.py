@@ -49,6 +49,7 @@ class MetricSettings:
     coarse_factor: int = 1
     coarse_min_cells: int = 0
     coarse_handoff_cells: int = 100000
+    coarse_handoff_share: float = 1.0
     coarse_spread: float = 1.0
     branches: str = "equal"
     node_offset_deg: float = 0.0
