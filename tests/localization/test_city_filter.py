@@ -124,6 +124,24 @@ def test_handoff_is_the_fewer_of_its_cells_and_its_share_of_the_map(grid, cells,
     assert MetricSettings.from_conf(load(None)["localization"]["metric"]).coarse_handoff_share == 1.0  # off: the cells alone
 
 
+def test_a_smaller_share_of_the_map_keeps_a_start_coarse_for_longer(grid):
+    graph, road, conf = grid
+    sim = simulate_pattern_drive(graph, 800.0, NOISE_LEVELS["medium"], np.random.default_rng(4))
+    steps = make("metric").observe(sim.odometry, road, conf).items
+    handed_at = {}
+    for share in (1.0, 0.06):
+        settings = MetricSettings.from_conf({**coarse_conf(conf)["localization"]["metric"], "coarse_handoff_share": share})
+        fine = MetricModel(graph, road.states, settings)
+        bank = CityFilter(fine, MetricModel(graph, road.states, coarse_settings(settings)))
+        bank.start()
+        for j, (direction, yaw) in enumerate(steps):
+            bank.update(direction, yaw)
+            if not bank.in_coarse[0]:
+                handed_at[share] = j
+                break
+    assert handed_at[1.0] < handed_at.get(0.06, len(steps)), handed_at  # 400 cells, then 6 % of the map: about 220
+
+
 def test_handed_over_belief_is_the_coarse_one_at_that_step(grid):
     """A coarse belief handed over stands for the position after the step that handed it over: the fine filter
     must not take that step a second time (which would move the mass one fine cell ahead of the coarse one)."""
