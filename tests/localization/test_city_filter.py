@@ -142,6 +142,27 @@ def test_a_smaller_share_of_the_map_keeps_a_start_coarse_for_longer(grid):
     assert handed_at[1.0] < handed_at.get(0.06, len(steps)), handed_at  # 400 cells, then 6 % of the map: about 220
 
 
+def test_evidence_counts_a_coarse_step_for_the_fine_steps_it_stands_for(grid):
+    """The restart's race weighs a challenger that began on coarse cells against a filter on the full grid: their
+    log-likelihoods must count the same drive alike (with one term per coarse step it was 59 % of the dense filter's)."""
+    graph, road, conf = grid
+    sim = simulate_pattern_drive(graph, 800.0, NOISE_LEVELS["medium"], np.random.default_rng(4))
+    steps = make("metric").observe(sim.odometry, road, conf).items
+    settings = MetricSettings.from_conf(coarse_conf(conf)["localization"]["metric"])
+    fine = MetricModel(graph, road.states, settings)
+    city, dense = CityFilter(fine, MetricModel(graph, road.states, coarse_settings(settings))), MetricFilter(fine)
+    city.start()
+    dense.start()
+    coarse_steps = 0
+    for direction, yaw in steps:
+        coarse_steps += int(city.in_coarse[0])
+        city.update(direction, yaw)
+        dense.update(direction, yaw)
+    assert 100 <= coarse_steps <= len(steps) - 100, coarse_steps  # a good part of the drive in each phase
+    # a coarse belief predicts a yaw less sharply than the full grid's, so it stays a little below (87 % when written)
+    assert 0.8 * dense.evidence[0] <= city.evidence()[0] <= 1.05 * dense.evidence[0], (city.evidence()[0], dense.evidence[0])
+
+
 def test_handed_over_belief_is_the_coarse_one_at_that_step(grid):
     """A coarse belief handed over stands for the position after the step that handed it over: the fine filter
     must not take that step a second time (which would move the mass one fine cell ahead of the coarse one)."""

@@ -108,8 +108,12 @@ class CityFilter:
             self._coarse_answers = None
 
     def evidence(self) -> NDArray[np.float64]:
-        """Per filter, the log-likelihood of the yaws seen since its start (one term per step of the phase it is in)."""
-        return self.fine.evidence + (self.coarse.evidence if self.coarse is not None else 0.0)
+        """Per filter, the log-likelihood of the yaws seen since its start, per fine step: a coarse step's term
+        counts for the ``coarse_factor`` fine steps it stands for, so that a filter that spent part of a stretch on
+        coarse cells is weighed on the same footing as one that spent it on the full grid (the restart's race)."""
+        if self.coarse is None:
+            return self.fine.evidence
+        return self.fine.evidence + self.factor * self.coarse.evidence
 
     def running(self) -> NDArray[np.bool_]:
         """Per filter, whether it takes steps (in either phase)."""
