@@ -71,6 +71,8 @@ class Chains:
     #: driven from the chain's start; along it the heading turns evenly
     arc_from: NDArray[np.float64] | None = None
     arc_len: NDArray[np.float64] | None = None
+    #: metres driven straight at half the turn in the middle of the arc (a U-turn across a median); None: 0
+    plateau: NDArray[np.float64] | None = None
 
     @property
     def num_chains(self) -> int:
@@ -230,7 +232,16 @@ class CellGrid:
         before = ch.split[self.chain]
         half = np.maximum(np.minimum(before, ch.map_length[self.chain] - before), 1e-9)
         near = np.clip(1.0 - np.abs(since_node) / half, 0.0, 1.0)
-        return np.where(ch.second_state[self.chain] >= 0, near * np.abs(ch.turn[self.chain]), 0.0)
+        ramp = np.where(ch.second_state[self.chain] >= 0, near * np.abs(ch.turn[self.chain]), 0.0)
+        if ch.plateau is None:
+            return ramp
+        # a U-turn across a median is two quarter turns with a straight between: each weighs as a turn of its own
+        quarter = ch.arc_len[self.chain] / 2.0
+        second_mid = 1.5 * quarter + ch.plateau[self.chain]
+        half_q = np.maximum(quarter / 2.0, 1e-9)
+        near_q = np.maximum(np.clip(1.0 - np.abs(self.offset - quarter / 2.0) / half_q, 0.0, 1.0),
+                            np.clip(1.0 - np.abs(self.offset - second_mid) / half_q, 0.0, 1.0))
+        return np.where(ch.plateau[self.chain] > 0, near_q * np.abs(ch.turn[self.chain]) / 2.0, ramp)
 
     def _turned_share(self, since_node: NDArray[np.float64], second: NDArray[np.bool_]) -> NDArray[np.float64]:
         """Share of the chain's turn still to come (< 0 after the node: the part not yet made), per cell."""
@@ -241,7 +252,10 @@ class CellGrid:
         made = 0.5 + 0.5 * np.sin(0.5 * np.pi * np.clip(since_node / half, -1.0, 1.0))
         if ch.arc_len is not None:  # a circular arc: the heading turns evenly with the distance driven along it
             arc = ch.arc_len[self.chain]
-            even = np.clip((self.offset - ch.arc_from[self.chain]) / np.maximum(arc, 1e-9), 0.0, 1.0)
+            along = self.offset - ch.arc_from[self.chain]
+            if ch.plateau is not None:  # half the turn, then straight over the plateau, then the other half
+                along = along - np.clip(along - arc / 2.0, 0.0, ch.plateau[self.chain])
+            even = np.clip(along / np.maximum(arc, 1e-9), 0.0, 1.0)
             made = np.where(arc > 0, even, made)
         share = np.where(second, made - 1.0, made)
         return np.where(ch.second_state[self.chain] >= 0, share, 0.0)

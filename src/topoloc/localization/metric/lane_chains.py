@@ -18,6 +18,13 @@ shorter than the map's path through the node (by 3.4 m for a right angle between
 8 m zones), and its heading turns evenly along the arc. With ``"node"`` it is the
 map's path; U-turns keep it either way.
 
+With ``u_turn_gap_m`` a U-turn may also be driven across a median that wide, as
+a car turns through the opening of a dual carriageway that the map has as one
+two-way road (``u_turn_gap_m`` between the carriageways' centre lines): a second
+U-turn chain, a quarter turn over each turn zone, straight at right angles
+across the rest of the gap between them; its cells spread over the map's path
+through the node.
+
 With ``wide_zone_m`` over ``turn_zone_m`` a vehicle may also turn widely: every turn
 but a U-turn has a second chain through zones of ``wide_zone_m``; a road's middle
 ends that far before its node, where half of the vehicles take a wide turn and the
@@ -66,13 +73,16 @@ def turn_arc_length(zone_in: NDArray[np.float64], zone_out: NDArray[np.float64],
 
 
 def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, heading_window_m: float,
-                u_turn_weight: float = 1.0, turn_path: str = "node", wide_zone_m: float = 0.0) -> Chains:
+                u_turn_weight: float = 1.0, turn_path: str = "node", wide_zone_m: float = 0.0,
+                u_turn_gap_m: float = 0.0) -> Chains:
     """Middles and turn chains of ``graph`` (see the module docstring); a U-turn chain is entered with
     ``u_turn_weight`` times the share of any other turn (each of its two sweeps half of that); ``turn_path``
     (``arc`` or ``node``) sets how long a turn chain is driven. With ``wide_zone_m`` over ``turn_zone_m`` every turn
     but a U-turn may also be driven widely, through zones of ``wide_zone_m`` (at most half the road): a middle then
     ends that far before the node, where half of the vehicles take a wide turn and the others drive on to the turn
-    zone (an *approach*), take a turn there and drive out of it (an *exit*) to the next middle."""
+    zone (an *approach*), take a turn there and drive out of it (an *exit*) to the next middle. With ``u_turn_gap_m``
+    over 0 a U-turn may also cross a median that wide (module docstring), sharing the U-turn's weight with the tight
+    one."""
     if turn_path not in TURN_PATHS:
         raise ValueError(f"turn_path must be one of {TURN_PATHS}, got {turn_path!r}")
     valid = np.flatnonzero(states.valid)
@@ -88,12 +98,20 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     # traffic or round a turning circle; its heading change of 180 deg alone cannot say which
     other_sweep = [(a, b) for a, b in pairs if b == a ^ 1]
     pairs += other_sweep
+    n_tight = len(pairs)
+    gap = max(float(u_turn_gap_m), 0.0)
+    if gap > 0:  # each sweep again, across the median
+        pairs += [(a, b) for a, b in pairs if b == a ^ 1]
     src = np.array([a for a, _ in pairs], np.int64)
     dst = np.array([b for _, b in pairs], np.int64)
     h_start, h_end = end_headings(graph, states, heading_window_m / 2.0)
     turn = np.angle(np.exp(1j * (h_start[dst] - h_end[src])))
     u_turn = dst == (src ^ 1)
-    clockwise = np.arange(len(src)) >= len(src) - len(other_sweep)  # the copies appended above
+    across = np.arange(len(src)) >= n_tight  # the U-turns across a median
+    k_tight = np.where(across, np.arange(len(src)) - n_tight, np.arange(len(src)))
+    n_u = int(u_turn[:n_tight].sum())
+    # the second sweep of each U-turn: the copies appended last, among the tight ones and among those across
+    clockwise = np.where(across, k_tight >= n_u - len(other_sweep), k_tight >= n_tight - len(other_sweep))
     turn = np.where(u_turn, np.where(clockwise, -np.pi, np.pi), turn)
     # a wide way through the node for every turn but a U-turn; a road that goes on within 30 deg is driven alike
     widens = np.flatnonzero(~u_turn & (np.abs(turn) >= np.radians(MIN_WIDE_TURN_DEG))
@@ -133,14 +151,19 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     zout = np.concatenate([zone[dst], wide[dst[widens]]])
     if turn_path == "arc":
         driven = turn_arc_length(zin, zout, both_turn)
-    curved = ~both_u & (driven > 1e-6)
-    driven = np.where(curved, driven, on_map)
+    curved = ~both_u & (driven > 1e-6) if turn_path == "arc" else np.zeros(len(driven), bool)
+    both_across = np.concatenate([across, np.zeros(len(widens), bool)])
+    # a U-turn across: a quarter turn over each zone (radius 2 z / pi), straight between them over the rest of the gap
+    plateau = np.where(both_across, np.maximum(gap - 2.0 / np.pi * on_map, 0.0), 0.0)
+    driven = np.where(curved, driven, on_map) + plateau
     arc_from = np.where(curved, zin - np.minimum(zin, zout), 0.0)  # straight up to the shorter zone's length
     arc_len = np.where(curved, driven - (zin + zout - 2.0 * np.minimum(zin, zout)), 0.0)
+    arc_len = np.where(both_across, on_map, arc_len)
     n_wides = np.array([len(wides_of.get(int(s), [])) for s in edged], float)
-    turn_weight = np.where(u_turn, 0.5 * float(u_turn_weight), 1.0)
+    turn_weight = np.where(u_turn, (0.25 if gap > 0 else 0.5) * float(u_turn_weight), 1.0)
     turn_way = np.where(u_turn, float(u_turn_weight), 1.0)
     ones = np.ones(n_edge + n_core)
+    shaped = turn_path == "arc" or gap > 0  # some turn chains are not the map's path through the node
     return Chains(
         length=np.concatenate([wide[edged] - zone[edged], core_len[cores], wide[edged] - zone[edged], driven]),
         next_ptr=np.concatenate([[0], np.cumsum(counts)]),
@@ -156,7 +179,8 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
         weight=np.concatenate([ones, np.maximum(n_wides, 1.0), turn_weight, np.ones(len(widens))]),
         way=np.concatenate([ones, np.maximum(n_wides, 1.0), turn_way, np.ones(len(widens))]),
         stretch=np.concatenate([np.ones(n_edge + n_core + n_edge), on_map / np.maximum(driven, 1e-9)])
-        if turn_path == "arc" else None,
-        arc_from=np.concatenate([np.zeros(n_edge + n_core + n_edge), arc_from]) if turn_path == "arc" else None,
-        arc_len=np.concatenate([np.zeros(n_edge + n_core + n_edge), arc_len]) if turn_path == "arc" else None,
+        if shaped else None,
+        arc_from=np.concatenate([np.zeros(n_edge + n_core + n_edge), arc_from]) if shaped else None,
+        arc_len=np.concatenate([np.zeros(n_edge + n_core + n_edge), arc_len]) if shaped else None,
+        plateau=np.concatenate([np.zeros(n_edge + n_core + n_edge), plateau]) if gap > 0 else None,
     )
