@@ -224,12 +224,12 @@ def test_a_u_turn_across_a_median_is_two_quarter_turns_and_a_straight():
     np.testing.assert_allclose(chains.plateau[across], 20.0 - 32.0 / np.pi)
     np.testing.assert_allclose(chains.length[across], 16.0 + 20.0 - 32.0 / np.pi)
     np.testing.assert_allclose(chains.map_length[across], 16.0)  # its cells spread over the map's path
-    # the U-turn keeps its weight, now shared by the tight and the wide way
+    # the U-turn keeps its weight, now shared by the tight way and the way across
     np.testing.assert_allclose(chains.weight[u_turn].sum(), plain.weight[u_plain].sum())
     grid = CellGrid(graph, states, chains, 1.0, 12.0)
     c = int(np.flatnonzero(across & (chains.turn > 0))[0])
     mine = grid.chain == c
-    turned = np.unwrap(np.radians(grid.heading[mine])) - np.radians(states_heading(grid, chains, c))
+    turned = np.unwrap(np.radians(grid.heading[mine])) - np.radians(approach_heading(grid, chains, c))
     straight = np.flatnonzero(grid.turn_ramp[mine] == 0)  # the crossing: no turn, so no wider heading spread
     assert len(straight) >= 9
     np.testing.assert_allclose(np.degrees(turned[straight]), 90.0, atol=1.0)
@@ -240,7 +240,7 @@ def test_a_u_turn_across_a_median_is_two_quarter_turns_and_a_straight():
     assert off.stretch is None and off.plateau is None
 
 
-def states_heading(grid: CellGrid, chains, c: int) -> float:
+def approach_heading(grid: CellGrid, chains, c: int) -> float:
     """Heading (degrees) of the road a chain comes from, at the end of its middle."""
     cells = np.flatnonzero((grid.state == chains.first_state[c]) & (chains.second_state[grid.chain] < 0))
     return float(grid.heading[cells[np.argmax(grid.state_offset[cells])]])
@@ -249,8 +249,8 @@ def states_heading(grid: CellGrid, chains, c: int) -> float:
 def test_the_filter_follows_a_car_that_u_turns_across_a_median_the_map_lacks():
     """Map error ``dual_as_one``: a dual carriageway mapped as one two-way road. A car that drives out and back on it
     turns through the median openings 20 m across, which no U-turn at a node explains: without ``u_turn_gap_m`` the
-    filter loses the road at every U-turn; with it, it stays on the road, never sure of a wrong one (the drive's mirror
-    walk on the same road explains it as well, so the two places share the probability)."""
+    filter loses the road at every U-turn; with it, it stays on the road and is seldom sure of a wrong one (the drive's
+    mirror walk on the same road explains it as well, so the two places share the probability)."""
     graph = _road_with_junction_ends()
     road = RoadMap(graph)
     gap = 20.0
