@@ -20,10 +20,9 @@ map's path; U-turns keep it either way.
 
 With ``u_turn_gap_m`` a U-turn may also be driven across a median that wide, as
 a car turns through the opening of a dual carriageway that the map has as one
-two-way road (``u_turn_gap_m`` between the carriageways' centre lines): a second
-U-turn chain, a quarter turn over each turn zone, straight at right angles
-across the rest of the gap between them; its cells spread over the map's path
-through the node.
+two-way road (``u_turn_gap_m`` from lane to lane): a second U-turn chain, a
+quarter turn over each turn zone, straight at right angles across the rest of
+the gap between them; its cells spread over the map's path through the node.
 
 With ``wide_zone_m`` over ``turn_zone_m`` a vehicle may also turn widely: every turn
 but a U-turn has a second chain through zones of ``wide_zone_m``; a road's middle
@@ -96,23 +95,21 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     pairs = [(int(a), int(b)) for a in valid for b in states.next_states(int(a))]
     # a U-turn (back onto the same road) may sweep either way: left in right-hand traffic, right in left-hand
     # traffic or round a turning circle; its heading change of 180 deg alone cannot say which
-    other_sweep = [(a, b) for a, b in pairs if b == a ^ 1]
-    pairs += other_sweep
+    u_pairs = [(a, b) for a, b in pairs if b == a ^ 1]
+    sweeps = [False] * len(pairs) + [True] * len(u_pairs)  # clockwise: the second sweep, a copy
+    pairs += u_pairs
     n_tight = len(pairs)
     gap = max(float(u_turn_gap_m), 0.0)
-    if gap > 0:  # each sweep again, across the median
-        pairs += [(a, b) for a, b in pairs if b == a ^ 1]
+    if gap > 0:  # both sweeps again, across the median
+        pairs += u_pairs + u_pairs
+        sweeps += [False] * len(u_pairs) + [True] * len(u_pairs)
+    across = np.arange(len(pairs)) >= n_tight  # the U-turns across a median
     src = np.array([a for a, _ in pairs], np.int64)
     dst = np.array([b for _, b in pairs], np.int64)
     h_start, h_end = end_headings(graph, states, heading_window_m / 2.0)
     turn = np.angle(np.exp(1j * (h_start[dst] - h_end[src])))
     u_turn = dst == (src ^ 1)
-    across = np.arange(len(src)) >= n_tight  # the U-turns across a median
-    k_tight = np.where(across, np.arange(len(src)) - n_tight, np.arange(len(src)))
-    n_u = int(u_turn[:n_tight].sum())
-    # the second sweep of each U-turn: the copies appended last, among the tight ones and among those across
-    clockwise = np.where(across, k_tight >= n_u - len(other_sweep), k_tight >= n_tight - len(other_sweep))
-    turn = np.where(u_turn, np.where(clockwise, -np.pi, np.pi), turn)
+    turn = np.where(u_turn, np.where(np.array(sweeps, bool), -np.pi, np.pi), turn)
     # a wide way through the node for every turn but a U-turn; a road that goes on within 30 deg is driven alike
     widens = np.flatnonzero(~u_turn & (np.abs(turn) >= np.radians(MIN_WIDE_TURN_DEG))
                             & ((wide[src] - zone[src]) + (wide[dst] - zone[dst]) > 1e-6))
