@@ -237,7 +237,14 @@ def test_a_u_turn_across_a_median_is_two_quarter_turns_and_a_straight():
     off = lane_chains(graph, states, 8.0, 12.0, u_turn_weight=0.02, u_turn_gap_m=0.0)
     for name in ("length", "next_idx", "first_state", "split", "second_state", "turn", "weight"):
         np.testing.assert_array_equal(getattr(plain, name), getattr(off, name))  # off: as before
-    assert off.stretch is None and off.plateau is None
+    assert off.stretch is None and off.plateau is None and off.without_across is None
+    # without the chains across (the coarse cells of a city map), each stands for itself, a U-turn across for its
+    # tight U-turn of the same sweep
+    same = chains.without_across
+    np.testing.assert_array_equal(same[~across], np.arange(plain.num_chains))
+    for name in ("first_state", "second_state", "turn"):
+        np.testing.assert_array_equal(getattr(plain, name)[same], getattr(chains, name))
+    np.testing.assert_allclose(plain.map_length[same], chains.map_length)
 
 
 def approach_heading(grid: CellGrid, chains, c: int) -> float:

@@ -6,7 +6,8 @@ per 2 m step: slower than a car drives. A filter therefore starts on a *coarse* 
 chains, so that every fine cell lies in one coarse cell): a coarse step is taken every ``coarse_factor``
 fine steps (net, so reversing counts back), with the yaw at that moment; ``coarse_factor`` 4 costs about
 16 times less per metre. The coarse model may be more tolerant (heading spread and turn spread times
-``coarse_spread``, the distance jitter scaled to the same variance per metre, no scale classes); with one
+``coarse_spread``, the distance jitter scaled to the same variance per metre, no scale classes, no U-turns across a
+median: a tight U-turn's coarse cells stand for them, at the share of both); with one
 observation per coarse cell it already tells roads apart less sharply per metre than the full grid, so the
 default spread is 1 and the coarse phase is kept short. Once the coarse belief of a filter holds at most
 ``coarse_handoff_cells`` positions (counted in fine cells), or ``coarse_handoff_share`` of the map's cells where
@@ -41,7 +42,7 @@ def coarse_settings(settings: MetricSettings) -> MetricSettings:
     return dataclasses.replace(settings, cell_m=settings.cell_m * k, step_jitter=settings.step_jitter / k,
                                heading_sigma_deg=settings.coarse_spread * settings.heading_sigma_deg,
                                turn_sigma_share=settings.coarse_spread * settings.turn_sigma_share, scale_classes=1, coarse_factor=1,
-                               lateral_offset_m=0.0)
+                               lateral_offset_m=0.0, u_turn_gap_m=0.0)
 
 
 def uses_coarse(settings: MetricSettings, fine_cells: int) -> bool:
@@ -66,14 +67,17 @@ class CityFilter:
         self.handoff = max(1, int(handoff) // self.factor)  # in coarse entries
         self.level, self.coarse_level = 0, 0  # net fine steps driven, and net coarse steps
         fg, cg = fine.grid, coarse.grid
-        index = np.floor(fg.offset / np.maximum(cg.cell_len[fg.chain], TINY)).astype(np.int64)
-        count = cg.base[fg.chain + 1] - cg.base[fg.chain]
-        self.coarse_of = cg.base[fg.chain] + np.clip(index, 0, np.maximum(count - 1, 0))  # fine cell -> coarse cell
+        across = fg.chains.without_across  # the coarse cells have no U-turns across: their tight U-turn stands for them
+        chain = fg.chain if across is None else across[fg.chain]
+        offset = fg.offset * (cg.chains.length[chain] / np.maximum(fg.chains.length[fg.chain], TINY))  # 1 but across
+        index = np.floor(offset / np.maximum(cg.cell_len[chain], TINY)).astype(np.int64)
+        count = cg.base[chain + 1] - cg.base[chain]
+        self.coarse_of = cg.base[chain] + np.clip(index, 0, np.maximum(count - 1, 0))  # fine cell -> coarse cell
         self.order = np.argsort(self.coarse_of, kind="stable")  # fine cells by coarse cell: a CSR list
         self.ptr = np.searchsorted(self.coarse_of[self.order], np.arange(cg.num_cells + 1))
         share = fg.cell_len[fg.chain] / np.maximum(cg.cell_len[cg.chain[self.coarse_of]], TINY)
         self.share = (share / np.maximum(np.bincount(self.coarse_of, weights=share, minlength=cg.num_cells), TINY)[self.coarse_of])
-        centre = np.abs(fg.offset - cg.offset[self.coarse_of])  # the fine cell nearest each coarse cell's centre
+        centre = np.abs(offset - cg.offset[self.coarse_of])  # the fine cell nearest each coarse cell's centre
         best = np.lexsort((centre, self.coarse_of))
         self.fine_of = np.full(cg.num_cells, -1, np.int64)
         self.fine_of[self.coarse_of[best[::-1]]] = best[::-1]

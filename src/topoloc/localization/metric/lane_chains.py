@@ -95,7 +95,9 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     pairs = [(int(a), int(b)) for a in valid for b in states.next_states(int(a))]
     # a U-turn (back onto the same road) may sweep either way: left in right-hand traffic, right in left-hand
     # traffic or round a turning circle; its heading change of 180 deg alone cannot say which
-    u_pairs = [(a, b) for a, b in pairs if b == a ^ 1]
+    u_at = [k for k, (a, b) in enumerate(pairs) if b == a ^ 1]
+    u_pairs = [pairs[k] for k in u_at]
+    n_plain = len(pairs)
     sweeps = [False] * len(pairs) + [True] * len(u_pairs)  # clockwise: the second sweep, a copy
     pairs += u_pairs
     n_tight = len(pairs)
@@ -161,6 +163,11 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     turn_way = np.where(u_turn, float(u_turn_weight), 1.0)
     ones = np.ones(n_edge + n_core)
     shaped = turn_path == "arc" or gap > 0  # some turn chains are not the map's path through the node
+    without_across = None
+    if gap > 0:  # the chains without the U-turns across: those before them, each across U-turn's tight one, the wides
+        tight = first_turn + np.concatenate([np.asarray(u_at, np.int64), n_plain + np.arange(len(u_pairs))])
+        without_across = np.concatenate([np.arange(first_turn + n_tight), tight,
+                                         first_turn + n_tight + np.arange(len(widens))])
     return Chains(
         length=np.concatenate([wide[edged] - zone[edged], core_len[cores], wide[edged] - zone[edged], driven]),
         next_ptr=np.concatenate([[0], np.cumsum(counts)]),
@@ -180,4 +187,5 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
         arc_from=np.concatenate([np.zeros(n_edge + n_core + n_edge), arc_from]) if shaped else None,
         arc_len=np.concatenate([np.zeros(n_edge + n_core + n_edge), arc_len]) if shaped else None,
         plateau=np.concatenate([np.zeros(n_edge + n_core + n_edge), plateau]) if gap > 0 else None,
+        without_across=without_across,
     )
