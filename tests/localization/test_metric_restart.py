@@ -63,9 +63,9 @@ def test_a_race_without_a_takeover_keeps_the_plain_filters_answers(seed):
     np.testing.assert_array_equal(plain.confidence, restarted.confidence)
 
 
-@pytest.mark.parametrize("seed", [6, 13])
+@pytest.mark.parametrize("seed", [13, 16])
 def test_a_lost_track_is_found_again_sooner(seed):
-    # nodes and curves displaced (medium): after the loop the plain filter stays lost for over a kilometre (seed 6:
+    # nodes and curves displaced (medium): after the loop the plain filter stays lost for over a kilometre (seed 16:
     # to the end of the drive); the restarted one swaps to its challenger and is right again in half that or less,
     # never sure of a wrong road after the return
     seen, odometry, xy, edge, driven, back = loop_drive(seed, "displacement")

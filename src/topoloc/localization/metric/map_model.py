@@ -54,10 +54,10 @@ class MetricSettings:
     branches: str = "equal"
     node_offset_deg: float = 0.0
     u_turns: str = "always"
-    u_turn_weight: float = 0.02
+    u_turn_weight: float = 0.3
     turn_path: str = "node"
     wide_zone_m: float = 0.0
-    u_turn_gap_m: float = 0.0
+    u_turn_gap_m: float = 17.5
     lateral_offset_m: float = 0.0
     turn_spread: str = "density"
     bend_spread: bool = True
