@@ -275,8 +275,8 @@ def test_the_filter_follows_a_car_that_u_turns_across_a_median_the_map_lacks():
         mass = np.array([sum(p.probability for p in places if p.state in (0, 1)) for places in track.places])
         on_road[across] = mass[after].mean()
         sure_wrong[across] = ((track.confidence >= 0.9) & ~right)[after].mean()
-    # without: 0.43 of the probability on the road, sure and wrong 0.25 of the time; with: 0.96 and 0.015 (when
-    # written: while the car crosses at the east end, the mirror walk's crossing at the west end runs along the side
+    # without: 0.43 of the probability on the road, sure and wrong 0.25 of the time; with: 0.97 and 0.009 (0.96 and
+    # 0.015 with U-turns at 0.02; while the car crosses at the east end, the mirror walk's crossing at the west end runs along the side
     # road there, an ordinary turn against a U-turn)
     assert on_road[0.0] <= 0.6 and on_road[gap] >= 0.9, on_road
     assert sure_wrong[gap] <= 0.03 and sure_wrong[0.0] >= 0.1, sure_wrong
