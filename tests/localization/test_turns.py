@@ -276,7 +276,7 @@ def test_the_filter_follows_a_car_that_u_turns_across_a_median_the_map_lacks():
         on_road[across] = mass[after].mean()
         sure_wrong[across] = ((track.confidence >= 0.9) & ~right)[after].mean()
     # without: 0.43 of the probability on the road, sure and wrong 0.25 of the time; with: 0.97 and 0.009 (0.96 and
-    # 0.015 with U-turns at 0.02; while the car crosses at the east end, the mirror walk's crossing at the west end runs along the side
-    # road there, an ordinary turn against a U-turn)
+    # 0.015 with U-turns at 0.02; while the car crosses at the east end, the mirror walk's crossing at the west end
+    # runs along the side road there, an ordinary turn against a U-turn)
     assert on_road[0.0] <= 0.6 and on_road[gap] >= 0.9, on_road
     assert sure_wrong[gap] <= 0.03 and sure_wrong[0.0] >= 0.1, sure_wrong
