@@ -129,6 +129,11 @@ def test_city_starts_localized_in_banks_of_any_size_give_the_same_answers(tmp_pa
     assert len(tables[0]) >= 3  # several starts, so a bank of one splits them
     # where each start localizes and how its answers score; confidences differ in float32's last digits (a bank's
     # sums run in another order), which can move an answer across a calibration bin or between two equal places
-    same = ["start", "steps", "localized_m", "accuracy_after", "confident_wrong"]
+    # (a U-turn's tight and across chains): a step or two of a start
+    same = ["start", "steps", "localized_m"]
     pd.testing.assert_frame_equal(tables[0][same], tables[1][same])
+    for column in ("accuracy_after", "confident_wrong"):
+        a, b = tables[0][column].to_numpy(), tables[1][column].to_numpy()
+        assert (np.isnan(a) == np.isnan(b)).all(), column
+        assert (np.nan_to_num(np.abs(a - b)) <= 2.0 / tables[0].steps.to_numpy()).all(), (column, a, b)
     np.testing.assert_allclose(tables[0].position_error_m, tables[1].position_error_m, atol=0.01)
