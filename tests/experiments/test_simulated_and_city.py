@@ -128,8 +128,8 @@ def test_city_starts_localized_in_banks_of_any_size_give_the_same_answers(tmp_pa
         tables.append(frame)
     assert len(tables[0]) >= 3  # several starts, so a bank of one splits them
     # where each start localizes and how its answers score; confidences differ in float32's last digits (a bank's
-    # sums run in another order), which can move an answer across a calibration bin or between two equal places
-    # (a U-turn's tight and across chains): a step or two of a start
+    # sums run in another order), which can move an answer across a calibration bin or between two equal places:
+    # a step or two of a start (one step of 578 with U-turns at 0.3 and across a median)
     same = ["start", "steps", "localized_m"]
     pd.testing.assert_frame_equal(tables[0][same], tables[1][same])
     for column in ("accuracy_after", "confident_wrong"):

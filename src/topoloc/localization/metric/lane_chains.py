@@ -98,7 +98,7 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     u_at = [k for k, (a, b) in enumerate(pairs) if b == a ^ 1]
     u_pairs = [pairs[k] for k in u_at]
     n_plain = len(pairs)
-    sweeps = [False] * len(pairs) + [True] * len(u_pairs)  # clockwise: the second sweep, a copy
+    sweeps = [False] * n_plain + [True] * len(u_pairs)  # clockwise: the second sweep, a copy
     pairs += u_pairs
     n_tight = len(pairs)
     gap = max(float(u_turn_gap_m), 0.0)
