@@ -110,7 +110,7 @@ def test_the_filter_keeps_up_with_a_car_that_cuts_its_corners():
 
 
 
-def test_wide_turns_branch_off_a_road_middle_half_and_half():
+def test_wide_turns_branch_off_a_road_middle_half_and_half_or_by_their_share():
     graph, _ = irregular_grid()
     states = directed_edges(graph, "always")
     plain, same = lane_chains(graph, states, 8.0, 12.0), lane_chains(graph, states, 8.0, 12.0, wide_zone_m=8.0)
@@ -124,6 +124,10 @@ def test_wide_turns_branch_off_a_road_middle_half_and_half():
     assert len(approach) == 1 and len(wide) >= 1
     assert chains.length[approach[0]] == pytest.approx(12.0)  # on from 20 m before the node to the 8 m zone
     assert chains.weight[approach[0]] == pytest.approx(chains.weight[wide].sum())  # half of the vehicles each way
+    fewer = lane_chains(graph, states, 8.0, 12.0, wide_zone_m=20.0, wide_share=0.2)  # a fifth take a wide turn
+    assert fewer.weight[approach[0]] == pytest.approx(4.0 * fewer.weight[wide].sum())
+    changed = fewer.weight != chains.weight  # the approaches only: four times the weight of their wide turns
+    assert changed[approach[0]] and np.allclose(fewer.weight[changed], 4.0 * chains.weight[changed])
     assert np.allclose(chains.split[wide], 20.0)
     assert not (chains.second_state[wide] == (chains.first_state[wide] ^ 1)).any()  # no wide U-turn
     grid = CellGrid(graph, states, chains, 2.0, 12.0)

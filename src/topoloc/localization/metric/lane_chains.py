@@ -73,13 +73,13 @@ def turn_arc_length(zone_in: NDArray[np.float64], zone_out: NDArray[np.float64],
 
 def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, heading_window_m: float,
                 u_turn_weight: float = 1.0, turn_path: str = "node", wide_zone_m: float = 0.0,
-                u_turn_gap_m: float = 0.0) -> Chains:
+                u_turn_gap_m: float = 0.0, wide_share: float = 0.5) -> Chains:
     """Middles and turn chains of ``graph`` (see the module docstring); a U-turn chain is entered with
     ``u_turn_weight`` times the share of any other turn (each of its two sweeps half of that); ``turn_path``
     (``arc`` or ``node``) sets how long a turn chain is driven. With ``wide_zone_m`` over ``turn_zone_m`` every turn
     but a U-turn may also be driven widely, through zones of ``wide_zone_m`` (at most half the road): a middle then
-    ends that far before the node, where half of the vehicles take a wide turn and the others drive on to the turn
-    zone (an *approach*), take a turn there and drive out of it (an *exit*) to the next middle. With ``u_turn_gap_m``
+    ends that far before the node, where ``wide_share`` of the vehicles (half) take a wide turn and the others drive on
+    to the turn zone (an *approach*), take a turn there and drive out of it (an *exit*) to the next middle. With ``u_turn_gap_m``
     over 0 a U-turn may also cross a median that wide (module docstring), sharing the U-turn's weight with the tight
     one."""
     if turn_path not in TURN_PATHS:
@@ -159,6 +159,8 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     arc_len = np.where(curved, driven - (zin + zout - 2.0 * np.minimum(zin, zout)), 0.0)
     arc_len = np.where(both_across, on_map, arc_len)
     n_wides = np.array([len(wides_of.get(int(s), [])) for s in edged], float)
+    # the approach's weight: wide_share of the vehicles at a middle's end take one of its wide turns (weight 1 each)
+    approach = np.where(n_wides > 0, n_wides * (1.0 - float(wide_share)) / float(wide_share), 1.0)
     turn_weight = np.where(u_turn, (0.25 if gap > 0 else 0.5) * float(u_turn_weight), 1.0)
     turn_way = np.where(u_turn, float(u_turn_weight), 1.0)
     ones = np.ones(n_edge + n_core)
@@ -179,9 +181,8 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
                               wide[src[widens]]]),
         second_state=np.concatenate([np.full(n_edge + n_core + n_edge, -1), dst, dst[widens]]),
         turn=np.concatenate([np.zeros(n_edge + n_core + n_edge), turn, turn[widens]]),
-        # at a middle's end the approach takes as much as all the wide turns together: half of the vehicles each way
-        weight=np.concatenate([ones, np.maximum(n_wides, 1.0), turn_weight, np.ones(len(widens))]),
-        way=np.concatenate([ones, np.maximum(n_wides, 1.0), turn_way, np.ones(len(widens))]),
+        weight=np.concatenate([ones, approach, turn_weight, np.ones(len(widens))]),
+        way=np.concatenate([ones, approach, turn_way, np.ones(len(widens))]),
         stretch=np.concatenate([np.ones(n_edge + n_core + n_edge), on_map / np.maximum(driven, 1e-9)])
         if shaped else None,
         arc_from=np.concatenate([np.zeros(n_edge + n_core + n_edge), arc_from]) if shaped else None,

@@ -57,6 +57,7 @@ class MetricSettings:
     u_turn_weight: float = 0.3
     turn_path: str = "node"
     wide_zone_m: float = 0.0
+    wide_share: float = 0.5
     u_turn_gap_m: float = 17.5
     lateral_offset_m: float = 0.0
     turn_spread: str = "density"
@@ -84,7 +85,8 @@ class MetricModel:
                  lane_offset_m: NDArray[np.float64] | None = None) -> None:
         self.settings = settings
         chains = lane_chains(graph, states, settings.turn_zone_m, settings.heading_window_m, settings.u_turn_weight,
-                             settings.turn_path, settings.wide_zone_m, settings.u_turn_gap_m)
+                             settings.turn_path, settings.wide_zone_m, settings.u_turn_gap_m,
+                             settings.wide_share)
         self.grid = grid = CellGrid(graph, states, chains, settings.cell_m, settings.heading_window_m, lane_offset_m)
         n = grid.num_cells
         p = settings.step_jitter
