@@ -128,6 +128,9 @@ def test_wide_turns_branch_off_a_road_middle_half_and_half_or_by_their_share():
     assert fewer.weight[approach[0]] == pytest.approx(4.0 * fewer.weight[wide].sum())
     changed = fewer.weight != chains.weight  # the approaches only: four times the weight of their wide turns
     assert changed[approach[0]] and np.allclose(fewer.weight[changed], 4.0 * chains.weight[changed])
+    for share in (0.0, 1.0):  # nobody or everybody turning widely leaves a chain that is never driven
+        with pytest.raises(ValueError, match="wide_share"):
+            lane_chains(graph, states, 8.0, 12.0, wide_zone_m=20.0, wide_share=share)
     assert np.allclose(chains.split[wide], 20.0)
     assert not (chains.second_state[wide] == (chains.first_state[wide] ^ 1)).any()  # no wide U-turn
     grid = CellGrid(graph, states, chains, 2.0, 12.0)

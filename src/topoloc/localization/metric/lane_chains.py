@@ -26,9 +26,9 @@ the gap between them; its cells spread over the map's path through the node.
 
 With ``wide_zone_m`` over ``turn_zone_m`` a vehicle may also turn widely: every turn
 but a U-turn has a second chain through zones of ``wide_zone_m``; a road's middle
-ends that far before its node, where ``wide_share`` of the vehicles (half) take a wide
-turn and the others drive on (an *approach*) to the turn zone, and after a turn drive out of it
-(an *exit*) to the next middle.
+ends that far before its node, where ``wide_share`` of the vehicles (by default half)
+take a wide turn and the others drive on (an *approach*) to the turn zone, and after a
+turn drive out of it (an *exit*) to the next middle.
 """
 
 from __future__ import annotations
@@ -78,12 +78,14 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     ``u_turn_weight`` times the share of any other turn (each of its two sweeps half of that); ``turn_path``
     (``arc`` or ``node``) sets how long a turn chain is driven. With ``wide_zone_m`` over ``turn_zone_m`` every turn
     but a U-turn may also be driven widely, through zones of ``wide_zone_m`` (at most half the road): a middle then
-    ends that far before the node, where ``wide_share`` of the vehicles (half) take a wide turn and the others drive
-    on to the turn zone (an *approach*), take a turn there and drive out of it (an *exit*) to the next middle. With
-    ``u_turn_gap_m`` over 0 a U-turn may also cross a median that wide (module docstring), sharing the U-turn's weight
-    with the tight one."""
+    ends that far before the node, where ``wide_share`` of the vehicles (by default half) take a wide turn and the
+    others drive on to the turn zone (an *approach*), take a turn there and drive out of it (an *exit*) to the next
+    middle. With ``u_turn_gap_m`` over 0 a U-turn may also cross a median that wide (module docstring), sharing the
+    U-turn's weight with the tight one."""
     if turn_path not in TURN_PATHS:
         raise ValueError(f"turn_path must be one of {TURN_PATHS}, got {turn_path!r}")
+    if not 0.0 < wide_share < 1.0:
+        raise ValueError(f"wide_share must lie strictly between 0 and 1, got {wide_share}")
     valid = np.flatnonzero(states.valid)
     length = states.length
     zone = np.where(states.valid, np.minimum(float(turn_zone_m), length / 2.0), 0.0)
