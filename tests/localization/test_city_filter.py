@@ -76,6 +76,30 @@ def test_coarse_phase_gives_the_dense_filters_answers(grid, level, seed):
     assert np.nanmedian(np.hypot(*(dense.xy[later] - city.xy[later]).T)) <= 1.0
 
 
+@pytest.mark.parametrize("extra", [{}, {"wide_zone_m": 20.0, "wide_share": 0.1}, {"turn_path": "arc", "wide_zone_m": 20.0}])
+def test_every_fine_cell_lies_in_the_coarse_cell_at_its_place(grid, extra):
+    """The coarse chains have neither U-turns across a median nor wide ways: each fine cell of those must still fall
+    in a coarse cell at its place on the map (a tight turn's, or its road's middle), within one coarse cell."""
+    graph, road, conf = grid
+    settings = MetricSettings.from_conf({**coarse_conf(conf)["localization"]["metric"], **extra})
+    fine = MetricModel(graph, road.states, settings)
+    coarse = MetricModel(graph, road.states, coarse_settings(settings))
+    bank = CityFilter(fine, coarse)
+    assert coarse.grid.chains.plain_turn is None  # the plain chains
+    fg, cg = fine.grid, coarse.grid
+    assert (np.bincount(bank.coarse_of, minlength=coarse.num_cells) > 0).all()  # every coarse cell covers fine cells
+    np.testing.assert_allclose(np.bincount(bank.coarse_of, weights=bank.share, minlength=coarse.num_cells), 1.0)
+    apart = np.hypot(*(fg.xy - cg.xy[bank.coarse_of]).T)
+    assert apart.max() <= 0.5 * cg.cell_len.max() + 1.0, apart.max()  # a coarse cell of 8 m stands for its centre
+    assert (fg.state[bank.coarse_of >= 0] == cg.state[bank.coarse_of]).mean() >= 0.97  # off only at the node
+    if "wide_zone_m" in extra:  # an approach takes its vehicles' share of the coarse cells it shares with wide turns
+        approach = (fg.chains.second_state[fg.chain] < 0) & (fg.chains.weight[fg.chain] != 1.0)
+        cells = np.unique(bank.coarse_of[approach])
+        part = np.bincount(bank.coarse_of[approach], weights=bank.share[approach], minlength=coarse.num_cells)[cells]
+        expected = 1.0 - settings.wide_share  # by length alone a third to a half (0.82-0.90 and 0.40-0.58 when written)
+        assert np.median(part) == pytest.approx(expected, abs=0.05) and part.min() >= expected - 0.15, part
+
+
 def test_coarse_phase_hands_over_and_back(grid):
     graph, road, conf = grid
     settings = MetricSettings.from_conf(coarse_conf(conf)["localization"]["metric"])

@@ -133,6 +133,11 @@ def test_wide_turns_branch_off_a_road_middle_half_and_half_or_by_their_share():
             lane_chains(graph, states, 8.0, 12.0, wide_zone_m=20.0, wide_share=share)
     assert np.allclose(chains.split[wide], 20.0)
     assert not (chains.second_state[wide] == (chains.first_state[wide] ^ 1)).any()  # no wide U-turn
+    # among the plain chains (the coarse cells of a city map) a wide turn stands for the tight turn of the same pair
+    plain_turns = np.flatnonzero(plain.second_state >= 0)
+    assert same.plain_turn is None and (chains.plain_turn[chains.second_state < 0] == -1).all()
+    for name in ("first_state", "second_state", "turn"):
+        np.testing.assert_array_equal(getattr(plain, name)[plain_turns[chains.plain_turn[wide]]], getattr(chains, name)[wide])
     grid = CellGrid(graph, states, chains, 2.0, 12.0)
     moves = grid.moves(2.0)
     np.testing.assert_allclose(np.bincount(moves.src, weights=moves.weight, minlength=grid.num_cells), 1.0)
@@ -244,14 +249,17 @@ def test_a_u_turn_across_a_median_is_two_quarter_turns_and_a_straight():
     off = lane_chains(graph, states, 8.0, 12.0, u_turn_weight=0.02, u_turn_gap_m=0.0)
     for name in ("length", "next_idx", "first_state", "split", "second_state", "turn", "weight"):
         np.testing.assert_array_equal(getattr(plain, name), getattr(off, name))  # off: as before
-    assert off.stretch is None and off.plateau is None and off.without_across is None
-    # without the chains across (the coarse cells of a city map), each stands for itself, a U-turn across for its
-    # tight U-turn of the same sweep
-    same = chains.without_across
-    np.testing.assert_array_equal(same[~across], np.arange(plain.num_chains))
+    assert off.stretch is None and off.plateau is None and off.plain_turn is None
+    # among the plain chains (the coarse cells of a city map) each turn stands for itself, a U-turn across for its
+    # tight U-turn of the same sweep; the pieces of a road for none
+    way = chains.plain_turn
+    plain_turns = np.flatnonzero(plain.second_state >= 0)
+    turns = chains.second_state >= 0
+    assert (way[~turns] == -1).all() and (way[turns] >= 0).all()
+    np.testing.assert_array_equal(way[turns & ~across], np.arange(len(plain_turns)))
     for name in ("first_state", "second_state", "turn"):
-        np.testing.assert_array_equal(getattr(plain, name)[same], getattr(chains, name))
-    np.testing.assert_allclose(plain.map_length[same], chains.map_length)
+        np.testing.assert_array_equal(getattr(plain, name)[plain_turns[way[turns]]], getattr(chains, name)[turns])
+    np.testing.assert_allclose(plain.map_length[plain_turns[way[turns]]], chains.map_length[turns])
 
 
 def approach_heading(grid: CellGrid, chains, c: int) -> float:

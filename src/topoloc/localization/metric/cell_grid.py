@@ -73,9 +73,10 @@ class Chains:
     arc_len: NDArray[np.float64] | None = None
     #: metres driven straight at half the turn in the middle of the arc (a U-turn across a median); None: 0
     plateau: NDArray[np.float64] | None = None
-    #: per chain, the same way among the chains built without U-turns across a median (a U-turn across: its tight
-    #: U-turn, of the same sweep); None: no U-turns across
-    without_across: NDArray[np.int64] | None = None
+    #: per chain, its way among the turns of the *plain* chains (built with neither U-turns across a median nor wide
+    #: ways, counted from 0 in their order): a turn its own, a U-turn across its tight U-turn of the same sweep, a
+    #: wide turn the tight turn of the same pair; -1 on the pieces of one road; None: the chains are the plain ones
+    plain_turn: NDArray[np.int64] | None = None
 
     @property
     def num_chains(self) -> int:

@@ -3,11 +3,12 @@
 On a city map (Heidelberg: 1.3 million cells of 2 m) a belief spread over the whole map costs about 0.2 s
 per 2 m step: slower than a car drives. A filter therefore starts on a *coarse* model of the same map
 (:class:`~topoloc.localization.metric.map_model.MetricModel` with cells ``coarse_factor`` times longer, on the same
-chains, so that every fine cell lies in one coarse cell): a coarse step is taken every ``coarse_factor``
+roads, so that every fine cell lies in one coarse cell): a coarse step is taken every ``coarse_factor``
 fine steps (net, so reversing counts back), with the yaw at that moment; ``coarse_factor`` 4 costs about
 16 times less per metre. The coarse model may be more tolerant (heading spread and turn spread times
 ``coarse_spread``, the distance jitter scaled to the same variance per metre, no scale classes, no U-turns across a
-median: a tight U-turn's coarse cells stand for them, at the share of both); with one
+median: a tight U-turn's coarse cells stand for them, at the share of both; no wide ways: the tight turns' cells
+and the road's middle stand for them, so that they cost nothing while the belief is broad); with one
 observation per coarse cell it already tells roads apart less sharply per metre than the full grid, so the
 default spread is 1 and the coarse phase is kept short. Once the coarse belief of a filter holds at most
 ``coarse_handoff_cells`` positions (counted in fine cells), or ``coarse_handoff_share`` of the map's cells where
@@ -31,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from topoloc.localization.metric.dense_filter import COMPLEX, REAL, TINY, Estimate, MetricFilter
+from topoloc.localization.metric.cell_grid import CellGrid
 from topoloc.localization.metric.map_model import MetricModel, MetricSettings
 from topoloc.localization.metric.von_mises import concentration, resultant_length
 from topoloc.localizer import Place
@@ -42,7 +44,33 @@ def coarse_settings(settings: MetricSettings) -> MetricSettings:
     return dataclasses.replace(settings, cell_m=settings.cell_m * k, step_jitter=settings.step_jitter / k,
                                heading_sigma_deg=settings.coarse_spread * settings.heading_sigma_deg,
                                turn_sigma_share=settings.coarse_spread * settings.turn_sigma_share, scale_classes=1, coarse_factor=1,
-                               lateral_offset_m=0.0, u_turn_gap_m=0.0)
+                               lateral_offset_m=0.0, u_turn_gap_m=0.0, wide_zone_m=0.0)
+
+
+def coarse_positions(fine: CellGrid, coarse: CellGrid) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Per fine cell, the coarse chain at its place on the map and the metres driven along it to there. The coarse
+    chains are the plain ones (:attr:`Chains.plain_turn`): a fine turn lies on the coarse turn of its way (a U-turn
+    across on its tight U-turn, spread over it; a wide turn where it is inside the tight turn's zones), the rest on
+    the middle of its road."""
+    fc, cc = fine.chains, coarse.chains
+    if fc.plain_turn is None:  # the same chains
+        return fine.chain, fine.offset * (cc.length[fine.chain] / np.maximum(fc.length[fine.chain], TINY))
+    turns = np.flatnonzero(cc.second_state >= 0)  # the plain turns, in their order
+    middles = np.flatnonzero(cc.second_state < 0)
+    middle_of = np.full(fine.states.num_states, -1, np.int64)
+    middle_of[cc.first_state[middles]] = middles
+    way = fc.plain_turn[fine.chain]
+    turn = turns[np.maximum(way, 0)]
+    on_map = fine.offset * (1.0 if fc.stretch is None else fc.stretch[fine.chain])
+    at = cc.split[turn] + on_map - fc.split[fine.chain]  # map metres along the coarse turn, the node at the same place
+    on_turn = (way >= 0) & (at >= -TINY) & (at <= cc.map_length[turn] + TINY)
+    middle = middle_of[fine.state]
+    if (middle[~on_turn] < 0).any():
+        raise ValueError("a fine cell outside every turn lies on a road without a middle among the coarse chains")
+    chain = np.where(on_turn, turn, middle)
+    along = np.where(on_turn, at, fine.state_offset - cc.first_from[np.maximum(middle, 0)])
+    stretch = 1.0 if cc.stretch is None else cc.stretch[chain]
+    return chain, np.clip(along / stretch, 0.0, cc.length[chain])
 
 
 def uses_coarse(settings: MetricSettings, fine_cells: int) -> bool:
@@ -67,15 +95,15 @@ class CityFilter:
         self.handoff = max(1, int(handoff) // self.factor)  # in coarse entries
         self.level, self.coarse_level = 0, 0  # net fine steps driven, and net coarse steps
         fg, cg = fine.grid, coarse.grid
-        across = fg.chains.without_across  # the coarse cells have no U-turns across: their tight U-turn stands for them
-        chain = fg.chain if across is None else across[fg.chain]
-        offset = fg.offset * (cg.chains.length[chain] / np.maximum(fg.chains.length[fg.chain], TINY))  # 1 but across
+        chain, offset = coarse_positions(fg, cg)
         index = np.floor(offset / np.maximum(cg.cell_len[chain], TINY)).astype(np.int64)
         count = cg.base[chain + 1] - cg.base[chain]
         self.coarse_of = cg.base[chain] + np.clip(index, 0, np.maximum(count - 1, 0))  # fine cell -> coarse cell
         self.order = np.argsort(self.coarse_of, kind="stable")  # fine cells by coarse cell: a CSR list
         self.ptr = np.searchsorted(self.coarse_of[self.order], np.arange(cg.num_cells + 1))
-        share = fg.cell_len[fg.chain] / np.maximum(cg.cell_len[cg.chain[self.coarse_of]], TINY)
+        # by length, and where ways overlap (an approach and the wide turns off it) by how many vehicles take each
+        way = 1.0 if fg.chains.weight is None else fg.chains.weight[fg.chain]
+        share = way * fg.cell_len[fg.chain] / np.maximum(cg.cell_len[cg.chain[self.coarse_of]], TINY)
         self.share = (share / np.maximum(np.bincount(self.coarse_of, weights=share, minlength=cg.num_cells), TINY)[self.coarse_of])
         centre = np.abs(offset - cg.offset[self.coarse_of])  # the fine cell nearest each coarse cell's centre
         best = np.lexsort((centre, self.coarse_of))

@@ -167,11 +167,12 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     turn_way = np.where(u_turn, float(u_turn_weight), 1.0)
     ones = np.ones(n_edge + n_core)
     shaped = turn_path == "arc" or gap > 0  # some turn chains are not the map's path through the node
-    without_across = None
-    if gap > 0:  # the chains without the U-turns across: those before them, each across U-turn's tight one, the wides
-        tight = first_turn + np.concatenate([np.asarray(u_at, np.int64), n_plain + np.arange(len(u_pairs))])
-        without_across = np.concatenate([np.arange(first_turn + n_tight), tight,
-                                         first_turn + n_tight + np.arange(len(widens))])
+    plain_turn = None
+    if gap > 0 or n_edge > 0:  # each way among the plain turns: a turn its own, a U-turn across its tight one, a wide
+        # turn the tight turn of the same pair; pieces of one road (exits, middles, approaches) none
+        tight = np.concatenate([np.asarray(u_at, np.int64), n_plain + np.arange(len(u_pairs))])
+        plain_turn = np.concatenate([np.full(n_edge + n_core + n_edge, -1), np.arange(n_tight),
+                                     tight[:len(src) - n_tight], widens]).astype(np.int64)
     return Chains(
         length=np.concatenate([wide[edged] - zone[edged], core_len[cores], wide[edged] - zone[edged], driven]),
         next_ptr=np.concatenate([[0], np.cumsum(counts)]),
@@ -190,5 +191,5 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
         arc_from=np.concatenate([np.zeros(n_edge + n_core + n_edge), arc_from]) if shaped else None,
         arc_len=np.concatenate([np.zeros(n_edge + n_core + n_edge), arc_len]) if shaped else None,
         plateau=np.concatenate([np.zeros(n_edge + n_core + n_edge), plateau]) if gap > 0 else None,
-        without_across=without_across,
+        plain_turn=plain_turn,
     )
