@@ -112,8 +112,11 @@ def test_u_turns_at_junctions_keep_the_track(seed):
 @pytest.mark.parametrize("seed", [1, 4])
 def test_u_turns_only_at_dead_ends_lose_the_track(seed):
     # the same drives with U-turns only at dead ends, outside the model where the drive turns: lost (seed 1), or
-    # sure of a wrong road where that road has a dead end that explains the turn (seed 4)
+    # sure of a wrong road where that road has a dead end that explains the turn (seed 4; with the wide ways of the
+    # defaults it is lost there too, unsure)
     right, confidence = out_and_back_answers(seed, u_turns="dead_ends")
+    assert right[len(right) // 3:].mean() < 0.5
+    right, confidence = out_and_back_answers(seed, u_turns="dead_ends", wide_zone_m=0.0)
     assert right[len(right) // 3:].mean() < 0.5
     assert seed != 4 or ((confidence >= 0.9) & ~right).mean() > 0.05
     right, confidence = out_and_back_answers(seed)

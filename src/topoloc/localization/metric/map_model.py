@@ -56,8 +56,8 @@ class MetricSettings:
     u_turns: str = "always"
     u_turn_weight: float = 0.3
     turn_path: str = "node"
-    wide_zone_m: float = 0.0
-    wide_share: float = 0.5
+    wide_zone_m: float = 20.0
+    wide_share: float = 0.1
     u_turn_gap_m: float = 17.5
     lateral_offset_m: float = 0.0
     turn_spread: str = "density"
