@@ -31,8 +31,8 @@ import dataclasses
 import numpy as np
 from numpy.typing import NDArray
 
-from topoloc.localization.metric.dense_filter import COMPLEX, REAL, TINY, Estimate, MetricFilter
 from topoloc.localization.metric.cell_grid import CellGrid
+from topoloc.localization.metric.dense_filter import COMPLEX, REAL, TINY, Estimate, MetricFilter
 from topoloc.localization.metric.map_model import MetricModel, MetricSettings
 from topoloc.localization.metric.von_mises import concentration, resultant_length
 from topoloc.localizer import Place
@@ -101,7 +101,7 @@ class CityFilter:
         self.coarse_of = cg.base[chain] + np.clip(index, 0, np.maximum(count - 1, 0))  # fine cell -> coarse cell
         self.order = np.argsort(self.coarse_of, kind="stable")  # fine cells by coarse cell: a CSR list
         self.ptr = np.searchsorted(self.coarse_of[self.order], np.arange(cg.num_cells + 1))
-        # by length, and where ways overlap (an approach and the wide turns off it) by how many vehicles take each
+        # by length, times the chain's weight where it branches off (an approach against the wide turns off it)
         way = 1.0 if fg.chains.weight is None else fg.chains.weight[fg.chain]
         share = way * fg.cell_len[fg.chain] / np.maximum(cg.cell_len[cg.chain[self.coarse_of]], TINY)
         self.share = (share / np.maximum(np.bincount(self.coarse_of, weights=share, minlength=cg.num_cells), TINY)[self.coarse_of])
