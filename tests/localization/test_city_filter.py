@@ -76,7 +76,8 @@ def test_coarse_phase_gives_the_dense_filters_answers(grid, level, seed):
     assert np.nanmedian(np.hypot(*(dense.xy[later] - city.xy[later]).T)) <= 1.0
 
 
-@pytest.mark.parametrize("extra", [{}, {"wide_zone_m": 20.0, "wide_share": 0.1}, {"turn_path": "arc", "wide_zone_m": 20.0}])
+@pytest.mark.parametrize("extra", [{"wide_zone_m": 0.0}, {"wide_zone_m": 20.0, "wide_share": 0.1},
+                                   {"turn_path": "arc", "wide_zone_m": 20.0, "wide_share": 0.5}])
 def test_every_fine_cell_lies_in_the_coarse_cell_at_its_place(grid, extra):
     """The coarse chains have neither U-turns across a median nor wide ways: each fine cell of those must still fall
     in a coarse cell at its place on the map (a tight turn's, or its road's middle), within one coarse cell."""
@@ -92,7 +93,7 @@ def test_every_fine_cell_lies_in_the_coarse_cell_at_its_place(grid, extra):
     apart = np.hypot(*(fg.xy - cg.xy[bank.coarse_of]).T)
     assert apart.max() <= 0.5 * cg.cell_len.max() + 1.0, apart.max()  # a coarse cell of 8 m stands for its centre
     assert (fg.state[bank.coarse_of >= 0] == cg.state[bank.coarse_of]).mean() >= 0.97  # off only at the node
-    if "wide_zone_m" in extra:  # an approach takes its vehicles' share of the coarse cells it shares with wide turns
+    if settings.wide_zone_m > 0:  # an approach takes its vehicles' share of the coarse cells it shares with wide turns
         approach = (fg.chains.second_state[fg.chain] < 0) & (fg.chains.weight[fg.chain] != 1.0)
         cells = np.unique(bank.coarse_of[approach])
         part = np.bincount(bank.coarse_of[approach], weights=bank.share[approach], minlength=coarse.num_cells)[cells]
