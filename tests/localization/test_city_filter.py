@@ -76,11 +76,13 @@ def test_coarse_phase_gives_the_dense_filters_answers(grid, level, seed):
     assert np.nanmedian(np.hypot(*(dense.xy[later] - city.xy[later]).T)) <= 1.0
 
 
-@pytest.mark.parametrize("extra", [{"wide_zone_m": 0.0}, {"wide_zone_m": 20.0, "wide_share": 0.1},
+@pytest.mark.parametrize("extra", [{"wide_zone_m": 0.0, "u_turn_gap_m": 0.0}, {"wide_zone_m": 0.0},
+                                   {"wide_zone_m": 20.0, "wide_share": 0.1},
                                    {"turn_path": "arc", "wide_zone_m": 20.0, "wide_share": 0.5}])
 def test_every_fine_cell_lies_in_the_coarse_cell_at_its_place(grid, extra):
     """The coarse chains have neither U-turns across a median nor wide ways: each fine cell of those must still fall
-    in a coarse cell at its place on the map (a tight turn's, or its road's middle), within one coarse cell."""
+    in a coarse cell at its place on the map (a tight turn's, or its road's middle), within one coarse cell (without
+    either, the fine chains are the coarse ones)."""
     graph, road, conf = grid
     settings = MetricSettings.from_conf({**coarse_conf(conf)["localization"]["metric"], **extra})
     fine = MetricModel(graph, road.states, settings)

@@ -53,8 +53,8 @@ def coarse_positions(fine: CellGrid, coarse: CellGrid) -> tuple[NDArray[np.int64
     across on its tight U-turn, spread over it; a wide turn where it is inside the tight turn's zones), the rest on
     the middle of its road."""
     fc, cc = fine.chains, coarse.chains
-    if fc.plain_turn is None:  # the same chains
-        return fine.chain, fine.offset * (cc.length[fine.chain] / np.maximum(fc.length[fine.chain], TINY))
+    if fc.plain_turn is None:  # the same chains, of the same lengths
+        return fine.chain, fine.offset
     turns = np.flatnonzero(cc.second_state >= 0)  # the plain turns, in their order
     middles = np.flatnonzero(cc.second_state < 0)
     middle_of = np.full(fine.states.num_states, -1, np.int64)
