@@ -47,14 +47,16 @@ def test_an_offset_class_moves_less_on_the_outside_of_a_turn():
     bank.last_yaw[:] = 0.0
     moves = bank._moves(0.5)  # half a radian left this step
     left, right = k, k + 1
-    assert moves[left] == 1 and bank.ahead[left] == pytest.approx(0.5)  # inside: 1.5 cells of the map per step
-    assert moves[right] == 0 and bank.ahead[right] == pytest.approx(0.5)  # outside: half a cell
-    np.testing.assert_array_equal(moves[:k], np.floor(1.0 / (1.0 + model.scales) + 1e-9))  # the scale classes as before
+    # whole cells, the nearest to where each class is: inside 1.5 cells of the map per step, outside half a cell
+    assert moves[left] == 2 and bank.ahead[left] == pytest.approx(-0.5)
+    assert moves[right] == 1 and bank.ahead[right] == pytest.approx(-0.5)
+    np.testing.assert_array_equal(moves[:k], np.floor(1.0 / (1.0 + model.scales) + 0.5))  # the scale classes as before
     moves = bank._moves(0.5 - 0.5)  # straight on: every class one cell, the offset's lead kept
     assert moves[left] == 1 and moves[right] == 1
+    assert bank.ahead[left] == pytest.approx(-0.5) and bank.ahead[right] == pytest.approx(-0.5)
     bank.last_yaw[:], bank.ahead[:] = 0.0, 0.0
     moves = bank._moves(-0.5)  # a right turn: the other way round
-    assert moves[left] == 0 and moves[right] == 1 and bank.ahead[right] == pytest.approx(0.5)
+    assert moves[left] == 1 and moves[right] == 2 and bank.ahead[right] == pytest.approx(-0.5)
 
 
 def test_a_belief_that_has_not_split_moves_one_cell_whatever_the_turn():

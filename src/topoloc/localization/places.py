@@ -21,10 +21,13 @@ CANDIDATES = 4
 
 def belief_places(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDArray, cell_edge: NDArray[np.int64],
                   cell_xy: NDArray[np.float64], filters: int, roads: int, k: int, merge_m: float = 0.0,
-                  which: NDArray[np.int64] | None = None) -> list[list[Place]]:
+                  which: NDArray[np.int64] | None = None, shift_m: float = 0.0,
+                  cell_direction: NDArray[np.float64] | None = None) -> list[list[Place]]:
     """Per filter of ``filters`` (or of those in ``which``, in its order), its top ``k`` places, from the belief's
     entries: the filter that ``owner``\\ s each entry, its ``cell`` and ``weight`` (entries of one cell may repeat:
-    they add up); ``cell_edge`` and ``cell_xy`` give each cell's road and position on a map of ``roads`` roads."""
+    they add up); ``cell_edge`` and ``cell_xy`` give each cell's road and position on a map of ``roads`` roads.
+    A place's position is its best cell's moved ``shift_m`` metres along that cell's unit ``cell_direction``
+    ``(cells, 2)`` (the distance driven since the belief's last step)."""
     owner, cell = np.asarray(owner, np.int64), np.asarray(cell, np.int64)
     weight = np.asarray(weight)
     key = owner * roads + cell_edge[cell]
@@ -44,7 +47,8 @@ def belief_places(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDA
     hit = mine[weight[mine] == best[key[mine]]][::-1]  # written last to first: the first entry of a tie wins
     best_cell = np.zeros(filters * roads, np.int64)
     best_cell[key[hit]] = cell[hit]
-    xy = cell_xy[best_cell[rows[:, None] * roads + top]]
+    chosen = best_cell[rows[:, None] * roads + top]
+    xy = cell_xy[chosen] if cell_direction is None or shift_m == 0 else cell_xy[chosen] + shift_m * cell_direction[chosen]
     xy = np.where((prob > 0)[..., None], xy, np.nan)
     states, probs, xs, ys = top.tolist(), prob.tolist(), xy[..., 0].tolist(), xy[..., 1].tolist()
     return [merge_sorted(states[b], probs[b], xs[b], ys[b], k, merge_m) for b in range(len(rows))]

@@ -47,6 +47,7 @@ class MetricLocalizer(RoadLocalizer):
         self.restart_margin = float(conf["localization"]["metric"]["restart_margin"])
         self.restart_hold_m = float(conf["localization"]["metric"]["restart_hold_m"])
         self.filter = self._bank(1)
+        self.past_m = 0.0
 
     def _bank(self, filters: int) -> CityFilter | RestartingFilter:
         """Filters for ``filters`` starts on this map (with challengers where ``restart`` is on)."""
@@ -57,19 +58,24 @@ class MetricLocalizer(RoadLocalizer):
 
     def observe(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any]) -> Observations:
         steps = odometry_steps(odometry.xy, odometry.yaw, float(conf["localization"]["metric"]["cell_m"]))
-        return Observations(list(zip(steps.direction.tolist(), steps.yaw.tolist())), steps.frame)
+        return Observations(list(zip(steps.direction.tolist(), steps.yaw.tolist(), steps.past_m.tolist())), steps.frame)
 
     def start(self) -> None:
         self.filter.start()
+        self.past_m = 0.0
 
-    def update(self, observation: tuple[int, float]) -> Answer:
-        direction, yaw = observation
+    def update(self, observation: tuple[int, float] | tuple[int, float, float]) -> Answer:
+        """One step: its direction and yaw (radians), and optionally the metres driven past it to the frame
+        answered at (:attr:`~topoloc.localization.metric.odometry_steps.Steps.past_m`)."""
+        direction, yaw, *past = observation
         self.filter.update(int(direction), float(yaw))
+        self.past_m = float(past[0]) if past else 0.0
         return self.answer()
 
     def answer(self) -> Answer:
-        """The top place of the belief, with the other top places (``localization.places``)."""
-        return Answer.of_places(self.filter.top_places(self.top, self.merge_m))
+        """The top place of the belief, with the other top places (``localization.places``), at the frame answered
+        at."""
+        return Answer.of_places(self.filter.top_places(self.top, self.merge_m, shift_m=self.past_m))
 
     def run_starts(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any],
                    starts: np.ndarray) -> list[tuple[int, Observations, Track]]:
@@ -89,7 +95,7 @@ class MetricLocalizer(RoadLocalizer):
                 bank.start(fresh)
             bank.update(int(steps.direction[j]), float(steps.yaw[j]))
             started = np.flatnonzero(first <= j)
-            for b, places in zip(started.tolist(), bank.places(self.top, self.merge_m, started)):
+            for b, places in zip(started.tolist(), bank.places(self.top, self.merge_m, started, float(steps.past_m[j]))):
                 answers[b].append(Answer.of_places(places))
         out = []
         for b, start in enumerate(starts):

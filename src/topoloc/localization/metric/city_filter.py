@@ -247,20 +247,21 @@ class CityFilter:
             offmap = np.where(self.in_coarse, self.coarse.offmap, offmap)
         return edge, confidence, offmap
 
-    def places(self, k: int, merge_m: float = 0.0, which: NDArray[np.int64] | None = None) -> list[list[Place]]:
+    def places(self, k: int, merge_m: float = 0.0, which: NDArray[np.int64] | None = None,
+               shift_m: float = 0.0) -> list[list[Place]]:
         """Per filter (or per filter in ``which``), its ``k`` most probable places (of the coarse belief while in the
-        coarse phase)."""
+        coarse phase), ``shift_m`` metres on (:meth:`DenseFilter.places`)."""
         which = np.arange(self.filters) if which is None else np.asarray(which, np.int64)
-        out = self.fine.places(k, merge_m, which)
+        out = self.fine.places(k, merge_m, which, shift_m)
         coarse = np.flatnonzero(self.in_coarse[which]) if self.coarse is not None else np.zeros(0, np.int64)
         if len(coarse):
-            for i, places in zip(coarse, self.coarse.places(k, merge_m, which[coarse])):
+            for i, places in zip(coarse, self.coarse.places(k, merge_m, which[coarse], shift_m)):
                 out[i] = places
         return out
 
-    def top_places(self, k: int, merge_m: float = 0.0, which: int = 0) -> list[Place]:
+    def top_places(self, k: int, merge_m: float = 0.0, which: int = 0, shift_m: float = 0.0) -> list[Place]:
         """The ``k`` most probable places of filter ``which`` (:class:`topoloc.localizer.RankedFilter`)."""
-        return self.places(k, merge_m)[which]
+        return self.places(k, merge_m, shift_m=shift_m)[which]
 
     def path(self, which: int = 0) -> NDArray[np.int64]:
         """Filter ``which``'s path traced back (fine cells; -1 throughout while it is still in the coarse phase)."""

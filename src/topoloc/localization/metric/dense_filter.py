@@ -218,7 +218,7 @@ class MetricFilter:
             turn = np.where(np.isfinite(turn), turn, 0.0)[filters]
             cells = cells - np.where(self.split[filters], np.tile(self.offset_cells, self.filters), 0.0) * turn
         total = self.ahead + cells
-        moves = np.clip(np.floor(total + 1e-9), 0, 2).astype(np.int64)
+        moves = np.clip(np.floor(total + 0.5), 0, 2).astype(np.int64)  # nearest: a class is never half a cell behind
         self.ahead = np.clip(total - moves, -1.0, 1.0)
         return moves
 
@@ -358,15 +358,17 @@ class MetricFilter:
         """The answer of filter ``which``."""
         return self.answers()[which]
 
-    def places(self, k: int, merge_m: float = 0.0, which: NDArray[np.int64] | None = None) -> list[list[Place]]:
+    def places(self, k: int, merge_m: float = 0.0, which: NDArray[np.int64] | None = None,
+               shift_m: float = 0.0) -> list[list[Place]]:
         """Per filter (or per filter in ``which``), its ``k`` most probable places
-        (:func:`topoloc.localization.places.belief_places`)."""
+        (:func:`topoloc.localization.places.belief_places`), each ``shift_m`` metres on along its cell's heading
+        (the distance driven since the last step)."""
         return belief_places(self.group // self.classes, self.cell, self.weight, self.grid.edge, self.grid.xy,
-                             self.filters, self.grid.states.num_edges, k, merge_m, which)
+                             self.filters, self.grid.states.num_edges, k, merge_m, which, shift_m, self.model.direction)
 
-    def top_places(self, k: int, merge_m: float = 0.0, which: int = 0) -> list[Place]:
+    def top_places(self, k: int, merge_m: float = 0.0, which: int = 0, shift_m: float = 0.0) -> list[Place]:
         """The ``k`` most probable places of filter ``which`` (:class:`topoloc.localizer.RankedFilter`)."""
-        return self.places(k, merge_m)[which]
+        return self.places(k, merge_m, shift_m=shift_m)[which]
 
     def path(self, which: int = 0) -> NDArray[np.int64]:
         """A consistent cell sequence of filter ``which``, traced back from its last step's most probable cell.

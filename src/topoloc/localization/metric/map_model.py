@@ -107,6 +107,7 @@ class MetricModel:
         # ``tolerance``: the density's normaliser stays that of a straight road's spread; ``density``: the wider one's
         self.norm_kappa = np.float32(1.0 / sigma**2) if settings.turn_spread == "tolerance" else None
         self.unheading = np.exp(-1j * np.radians(grid.heading)).astype(np.complex64)  # e^{-i h}: a yaw into an offset
+        self.direction = np.column_stack([np.cos(np.radians(grid.heading)), np.sin(np.radians(grid.heading))])  # of travel
         drift = float(np.radians(settings.offset_drift_deg) ** 2 * settings.cell_m / 100.0)  # variance per step
         # through a node the offset may jump (each road's map heading errs its own way): spread over the turn chain
         on_turn = grid.chains.second_state[grid.chain] >= 0

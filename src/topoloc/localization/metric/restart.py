@@ -141,13 +141,14 @@ class RestartingFilter:
         """The answer of main filter ``which``."""
         return self.answers()[which]
 
-    def places(self, k: int, merge_m: float = 0.0, which: NDArray[np.int64] | None = None) -> list[list[Place]]:
-        """Per main filter (or per main filter in ``which``), its ``k`` most probable places."""
-        return self.bank.places(k, merge_m, self.slot if which is None else self.slot[np.asarray(which, np.int64)])
+    def places(self, k: int, merge_m: float = 0.0, which: NDArray[np.int64] | None = None,
+               shift_m: float = 0.0) -> list[list[Place]]:
+        """Per main filter (or per main filter in ``which``), its ``k`` most probable places, ``shift_m`` metres on."""
+        return self.bank.places(k, merge_m, self.slot if which is None else self.slot[np.asarray(which, np.int64)], shift_m)
 
-    def top_places(self, k: int, merge_m: float = 0.0, which: int = 0) -> list[Place]:
+    def top_places(self, k: int, merge_m: float = 0.0, which: int = 0, shift_m: float = 0.0) -> list[Place]:
         """The ``k`` most probable places of main filter ``which``."""
-        return self.places(k, merge_m)[which]
+        return self.places(k, merge_m, shift_m=shift_m)[which]
 
     def path(self, which: int = 0) -> NDArray[np.int64]:
         """Main filter ``which``'s path traced back (fine cells, -1 where unknown), across its swaps."""
