@@ -11,6 +11,7 @@ from topoloc.config import load
 from topoloc.localization.evaluation import DriveTruth, Judge, score_start
 from topoloc.localization.metric.dense_filter import MetricFilter
 from topoloc.localization.metric.map_model import MetricModel, MetricSettings
+from topoloc.localization.metric.odometry_steps import odometry_steps
 from topoloc.localization.roadmap import RoadMap
 from topoloc.motion.poses import Odometry
 from topoloc.odometry.simulate import NOISE_LEVELS, NoiseLevel, simulate_pattern_drive
@@ -132,3 +133,14 @@ def test_answers_are_not_behind_the_car(grid, level, seed):
     assert sure.sum() >= 200
     along = ((track.xy - sim.gt_xy[frame]) * heading).sum(axis=1)[sure]
     assert abs(np.mean(along)) <= 0.8 and abs(np.median(along)) <= 0.8, (np.mean(along), np.median(along))
+
+
+def test_steps_know_how_far_their_frame_lies_past_them():
+    """0.7 m a frame east, then back west: a 2 m step at each crossing of a multiple of 2 m, answered at the first
+    frame past it, which lies ``past_m`` beyond the step's point (negative while reversing)."""
+    x = np.concatenate([np.arange(0.0, 7.01, 0.7), np.arange(6.3, 2.9, -0.7)])
+    steps = odometry_steps(np.column_stack([x, np.zeros_like(x)]), np.zeros_like(x), 2.0)
+    np.testing.assert_array_equal(steps.direction, [1, 1, 1, -1])
+    np.testing.assert_array_equal(steps.frame, [3, 6, 9, 15])  # x = 2.1, 4.2, 6.3 on the way out, then 3.5 back
+    np.testing.assert_allclose(steps.past_m, [0.1, 0.2, 0.3, -0.5], atol=1e-9)
+    assert (np.abs(steps.past_m) < 0.7).all()
