@@ -35,6 +35,19 @@ def test_judge_accepts_the_neighbouring_road_near_the_node_only(corridor_drive):
     assert not Judge(graph, 0.0).right(np.array([1]), truth.edge[[97]], truth.xy[[97]])[0]
 
 
+def test_judge_measures_from_the_true_junction_on_a_map_whose_node_moved(corridor_drive):
+    graph, truth = corridor_drive
+    moved = graph.nodes.copy()
+    moved.loc[moved.index[1], "x"] += 6.0  # the map's node 1 lies 6 m past the junction the vehicle drives through
+    frames = np.array([97, 103])
+    answer = np.array([1, 0])  # the neighbouring road, 3 m from the true junction
+    assert Judge(graph, 5.0).right(answer, truth.edge[frames], truth.xy[frames]).tolist() == [True, True]
+    graph.nodes = moved
+    assert Judge(graph, 5.0).right(answer, truth.edge[frames], truth.xy[frames]).tolist() == [False, True]  # 9 m, 3 m
+    true_nodes = corridor_graph().nodes
+    assert Judge(graph, 5.0, true_nodes).right(answer, truth.edge[frames], truth.xy[frames]).tolist() == [True, True]
+
+
 def test_per_start_table(corridor_drive):
     graph, truth = corridor_drive
     judge = Judge(graph, 5.0)

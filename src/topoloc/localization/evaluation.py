@@ -90,10 +90,12 @@ def start_frames(driven: NDArray[np.float64], every_m: float) -> NDArray[np.int6
 class Judge:
     """Scores answers against a drive's truth on one road graph (see the module docstring)."""
 
-    def __init__(self, graph: RoadGraph, node_tolerance_m: float) -> None:
+    def __init__(self, graph: RoadGraph, node_tolerance_m: float, node_xy: pd.DataFrame | None = None) -> None:
+        """``node_xy``: where the nodes are in the truth's frame (columns ``x``, ``y``, indexed by node id), for a map
+        whose nodes are displaced from the true junctions; default the graph's own."""
         self.u = graph.edges.u.to_numpy(np.int64)
         self.v = graph.edges.v.to_numpy(np.int64)
-        self.node_xy = graph.nodes[["x", "y"]]
+        self.node_xy = graph.nodes[["x", "y"]] if node_xy is None else node_xy[["x", "y"]]
         self.tolerance = float(node_tolerance_m)
 
     def right(self, answer: NDArray[np.int64], truth: NDArray[np.int64], xy: NDArray[np.float64]) -> NDArray[np.bool_]:
