@@ -6,7 +6,10 @@ simulated on the true map (random walks of 1.5-2.5 km, medium odometry noise) an
 (``node`` m sd per axis, the geometry follows), inner vertices moved (``vertex``), Douglas-Peucker at
 ``simplify`` m, ``phantom`` x roads of straight two-way links that do not exist; and each drive leaves the map once
 for a 120 m loop (a parking lot: 30 m out to the right, 60 m back, onto the road again, then driven on;
-:func:`topoloc.odometry.map_error_drives.off_map_loop`).
+:func:`topoloc.odometry.map_error_drives.off_map_loop`). ``--level`` (``LEVELS``): ``medium`` all of it, ``low`` less,
+``detour`` the loop alone, ``node`` the nodes moved alone, ``geom`` nodes, vertices and simplification without the
+loop or phantom roads, ``none`` the exact map. A neighbouring road counts right near the true junction
+(:class:`topoloc.localization.evaluation.Judge` with the true nodes), not near the moved node.
 
     python -m benchmarks.bench_filter_recovery [--graph results/helsinki/graph/graph.graphml] [--level medium]
         [--drives 2] [--seeds 1,2] [--start-every 300] [--set localization.metric.heading_sigma_deg=8 ...]
@@ -50,6 +53,7 @@ REPO = Path(__file__).resolve().parents[1]
 LEVELS = {"none": dict(node=0.0, vertex=0.0, simplify=0.0, phantom=0.0, detour=0.0),
           "low": dict(node=1.5, vertex=0.5, simplify=1.0, phantom=0.03, detour=1.0),
           "detour": dict(node=0.0, vertex=0.0, simplify=0.0, phantom=0.0, detour=1.0),
+          "node": dict(node=2.5, vertex=0.0, simplify=0.0, phantom=0.0, detour=0.0),
           "geom": dict(node=2.5, vertex=1.0, simplify=3.0, phantom=0.0, detour=0.0),
           "medium": dict(node=2.5, vertex=1.0, simplify=3.0, phantom=0.08, detour=1.0)}
 
