@@ -26,13 +26,11 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import dotted_overrides, load
-from topoloc.experiments.city import confirmed
-from topoloc.experiments.map_error_starts import localize_error, table
+from topoloc.experiments.map_error_starts import level_table, localize_error, table
 from topoloc.experiments.map_errors import plot_calibration
 from topoloc.odometry.map_errors import ERROR_TYPES
 
@@ -90,14 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         print("## Per error type, level and localizer\n")
         print(table(frame, ["error", "level", "localizer"]).to_markdown(index=False, floatfmt=".3f"))
         print("\n## Pooled per level: every error type and map\n")
-        pooled = table(frame, ["level", "localizer"])
-        confirm_m = float(conf["localization"]["evaluate"]["confirm_m"])
-        sure = confirmed(frame[np.isfinite(frame.oracle_m)], confirm_m)
-        by_level = sure.groupby(["level", "localizer"], sort=False)
-        pooled["confirmed"] = [len(by_level.get_group(k)) if k in by_level.groups else 0
-                               for k in zip(pooled.level, pooled.localizer)]
-        pooled["localized_confirmed"] = [float(np.isfinite(by_level.get_group(k).localized_m).mean())
-                                         if k in by_level.groups else np.nan for k in zip(pooled.level, pooled.localizer)]
+        pooled = level_table(frame, float(conf["localization"]["evaluate"]["confirm_m"]))
         print(pooled.to_markdown(index=False, floatfmt=".3f"))
         print("\n## Per error type and map\n")
         print(table(frame, ["error", "map", "localizer"]).to_markdown(index=False, floatfmt=".3f"))

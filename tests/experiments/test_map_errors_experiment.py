@@ -67,7 +67,7 @@ def test_summary_per_error_type_and_level(jobs):
     outputs = {"summary": str(tmp / "summary.md"), "json": str(tmp / "summary.json"),
                "reliability": str(tmp / "reliability.png")}
     conf = _conf("none", maps=["dual_grid", "grid"], levels=["medium"], drives=1, localizers=["hmm"])
-    metrics = map_errors.summarize({"map_errors": conf["map_errors"]}, inputs, outputs)
+    metrics = map_errors.summarize({"map_errors": conf["map_errors"], "confirm_m": 200.0}, inputs, outputs)
     text = (tmp / "summary.md").read_text()
     assert text.startswith("## Map errors: localizers against the oracle of the map they see")
     assert "missing_road/medium" in text and "none/none" in text
@@ -83,6 +83,26 @@ def test_summary_per_error_type_and_level(jobs):
     assert metrics["hmm/up_to_medium/ece"] == pytest.approx(calibration.ece(pooled))
     assert metrics["hmm/up_to_medium/ece"] != pytest.approx(job["ece"])  # both jobs' answers, not one's
     assert (tmp / "reliability.png").stat().st_size > 10_000
+    # the targets are per level: each level's figures over every error type pooled
+    medium = pooled[pooled.level == "medium"]
+    assert metrics["hmm/all_errors/medium/oracle_resolved"] == pytest.approx(np.isfinite(medium.oracle_m).mean())
+    assert metrics["hmm/all_errors/medium/localized_share"] == pytest.approx(targets(medium)["localized_share"])
+
+
+def test_level_table_pools_every_error_type_and_counts_the_confirmed_starts():
+    # two error types at one level: 4 resolved starts, 2 localized; the one localized with 100 m of drive after the
+    # oracle's limit and the one missed with 50 m are not confirmed (200 m)
+    frame = pd.DataFrame({"error": ["a", "a", "b", "b", "b", "none"], "level": ["medium"] * 5 + ["none"],
+                          "localizer": ["x"] * 6, "oracle_m": [100.0, 100.0, 100.0, np.nan, 100.0, 50.0],
+                          "length_m": [400.0, 200.0, 400.0, 400.0, 150.0, 300.0],
+                          "localized_m": [120.0, 150.0, np.nan, np.nan, np.nan, 40.0],
+                          "ratio": [1.2, 1.5, np.inf, np.nan, np.inf, 0.8], "steps": [10.0] * 6,
+                          "accuracy_after": [1.0] * 6, "position_error_m": [1.0] * 6, "confident_wrong": [0.0] * 6})
+    table = map_error_starts.level_table(frame, 200.0).set_index("level")
+    assert table.loc["medium", "starts"] == 5 and table.loc["medium", "oracle_resolved"] == pytest.approx(0.8)
+    assert table.loc["medium", "localized_share"] == pytest.approx(2 / 4)
+    assert table.loc["medium", "confirmed"] == 2 and table.loc["medium", "localized_confirmed"] == pytest.approx(1 / 2)
+    assert table.loc["none", "confirmed"] == 1 and table.loc["none", "localized_confirmed"] == 1.0
 
 
 def test_unknown_map_is_one_clear_error(tmp_path):

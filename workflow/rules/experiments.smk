@@ -94,7 +94,7 @@ rule summarize_map_errors:
             labels={"region": "{region}", "figure": "reliability, map errors up to medium"},
         ),
     params:
-        conf={"map_errors": EXPERIMENTS["map_errors"]},
+        conf={"map_errors": EXPERIMENTS["map_errors"], "confirm_m": config["localization"]["evaluate"]["confirm_m"]},
         code=code("topoloc.experiments.map_errors"),
     log:
         "results/{region}/logs/summarize_map_errors.log",

@@ -28,6 +28,7 @@ import numpy as np
 import pandas as pd
 
 from topoloc.errors import InputError
+from topoloc.experiments.city import confirmed
 from topoloc.experiments.many_starts import start_rows, targets
 from topoloc.experiments.maps import load_map
 from topoloc.graph.from_osm import build_road_graph
@@ -148,6 +149,19 @@ def table(frame: pd.DataFrame, by: list[str], columns: list[str] | None = None) 
             for key, group in frame.groupby(by, sort=False)]
     out = pd.DataFrame(rows)
     return out[by + (columns or ["starts", *FIGURES])] if len(out) else out
+
+
+def level_table(frame: pd.DataFrame, confirm_m: float) -> pd.DataFrame:
+    """:func:`table` per level and localizer, every error type and map pooled (the issue's targets are per level),
+    with the resolved starts that are *confirmed* (:func:`topoloc.experiments.city.confirmed`: at least ``confirm_m``
+    of drive after the oracle's limit) and the share of them localized."""
+    out = table(frame, ["level", "localizer"])
+    sure = confirmed(frame[np.isfinite(frame.oracle_m)], confirm_m)
+    keys = list(zip(out.level, out.localizer)) if len(out) else []
+    groups = dict(list(sure.groupby(["level", "localizer"], sort=False)))
+    out["confirmed"] = [len(groups[k]) if k in groups else 0 for k in keys]
+    out["localized_confirmed"] = [float(np.isfinite(groups[k].localized_m).mean()) if k in groups else np.nan for k in keys]
+    return out
 
 
 def report(frame: pd.DataFrame, seconds: dict[str, float]) -> str:
