@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from topoloc.errors import InputError
-from topoloc.experiments.many_starts import start_rows, targets
+from topoloc.experiments.many_starts import confirmed, start_rows, targets
 from topoloc.experiments.summary import write_summary
 from topoloc.graph.from_osm import build_road_graph
 from topoloc.io import atomic_path, write_json, write_text
@@ -142,12 +142,6 @@ def localize_level(conf: dict[str, Any], level: str, figures: Path | None) -> tu
                      measured["unsure_x_realtime"], peak_mb())
         speed.append({"map": map_name, "level": "oracle", "drive": "", "starts_cpu_s": oracle_cpu, "peak_mb": peak_mb()})
     return pd.DataFrame(rows), pd.DataFrame(speed)
-
-
-def confirmed(frame: pd.DataFrame, confirm_m: float) -> pd.DataFrame:
-    """The starts whose drive goes on for at least ``confirm_m`` after the oracle's limit (elsewhere the oracle
-    is unique "to the end of the drive" over less than ``confirm_m``, and so is a localizer judged)."""
-    return frame[frame.length_m - frame.oracle_m >= confirm_m]
 
 
 def with_confirmed(group: pd.DataFrame, confirm_m: float) -> dict[str, float]:

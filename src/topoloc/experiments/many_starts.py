@@ -44,6 +44,12 @@ def targets(group: pd.DataFrame) -> dict[str, float]:
     }
 
 
+def confirmed(frame: pd.DataFrame, confirm_m: float) -> pd.DataFrame:
+    """The starts whose drive goes on for at least ``confirm_m`` after the oracle's limit (elsewhere the oracle
+    is unique "to the end of the drive" over less than ``confirm_m``, and so is a localizer judged)."""
+    return frame[frame.length_m - frame.oracle_m >= confirm_m]
+
+
 def start_rows(judge: Judge, truth: DriveTruth, runs: list, limits: dict[int, float], ev: dict[str, Any],
                localizer: str, **columns: Any) -> list[dict[str, Any]]:
     """One row per start of ``runs`` (``run_starts``' (start, observations, track)) of ``localizer``: the fixed

@@ -28,8 +28,7 @@ import numpy as np
 import pandas as pd
 
 from topoloc.errors import InputError
-from topoloc.experiments.city import confirmed
-from topoloc.experiments.many_starts import start_rows, targets
+from topoloc.experiments.many_starts import confirmed, start_rows, targets
 from topoloc.experiments.maps import load_map
 from topoloc.graph.from_osm import build_road_graph
 from topoloc.graph.road_graph import RoadGraph
@@ -153,7 +152,7 @@ def table(frame: pd.DataFrame, by: list[str], columns: list[str] | None = None) 
 
 def level_table(frame: pd.DataFrame, confirm_m: float) -> pd.DataFrame:
     """:func:`table` per level and localizer, every error type and map pooled (the issue's targets are per level),
-    with the resolved starts that are *confirmed* (:func:`topoloc.experiments.city.confirmed`: at least ``confirm_m``
+    with the resolved starts that are *confirmed* (:func:`~topoloc.experiments.many_starts.confirmed`: at least ``confirm_m``
     of drive after the oracle's limit) and the share of them localized."""
     out = table(frame, ["level", "localizer"])
     sure = confirmed(frame[np.isfinite(frame.oracle_m)], confirm_m)
