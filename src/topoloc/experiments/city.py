@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from topoloc.errors import InputError
-from topoloc.experiments.many_starts import confirmed, start_rows, targets
+from topoloc.experiments.many_starts import confirmed, start_rows, targets, with_confirmed
 from topoloc.experiments.summary import write_summary
 from topoloc.graph.from_osm import build_road_graph
 from topoloc.io import atomic_path, write_json, write_text
@@ -142,12 +142,6 @@ def localize_level(conf: dict[str, Any], level: str, figures: Path | None) -> tu
                      measured["unsure_x_realtime"], peak_mb())
         speed.append({"map": map_name, "level": "oracle", "drive": "", "starts_cpu_s": oracle_cpu, "peak_mb": peak_mb()})
     return pd.DataFrame(rows), pd.DataFrame(speed)
-
-
-def with_confirmed(group: pd.DataFrame, confirm_m: float) -> dict[str, float]:
-    """:func:`targets`, plus the localized share and median ratio on the :func:`confirmed` starts."""
-    t, c = targets(group), targets(confirmed(group, confirm_m))
-    return {**t, "confirmed": c["resolved"], "localized_confirmed": c["localized_share"], "ratio_confirmed": c["median_ratio"]}
 
 
 LIVE_COLUMNS = ["sure_after_m", "unsure_cpu_per_step", "unsure_worst_100", "after_cpu_per_step", "unsure_x_realtime",

@@ -50,6 +50,17 @@ def confirmed(frame: pd.DataFrame, confirm_m: float) -> pd.DataFrame:
     return frame[frame.length_m - frame.oracle_m >= confirm_m]
 
 
+def confirmed_figures(group: pd.DataFrame, confirm_m: float) -> dict[str, float]:
+    """The :func:`confirmed` starts the oracle resolves, and the localized share and median ratio on them."""
+    c = targets(confirmed(group, confirm_m))
+    return {"confirmed": c["resolved"], "localized_confirmed": c["localized_share"], "ratio_confirmed": c["median_ratio"]}
+
+
+def with_confirmed(group: pd.DataFrame, confirm_m: float) -> dict[str, float]:
+    """:func:`targets`, plus :func:`confirmed_figures`."""
+    return {**targets(group), **confirmed_figures(group, confirm_m)}
+
+
 def start_rows(judge: Judge, truth: DriveTruth, runs: list, limits: dict[int, float], ev: dict[str, Any],
                localizer: str, **columns: Any) -> list[dict[str, Any]]:
     """One row per start of ``runs`` (``run_starts``' (start, observations, track)) of ``localizer``: the fixed

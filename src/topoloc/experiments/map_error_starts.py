@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from topoloc.errors import InputError
-from topoloc.experiments.many_starts import confirmed, start_rows, targets
+from topoloc.experiments.many_starts import confirmed_figures, start_rows, targets
 from topoloc.experiments.maps import load_map
 from topoloc.graph.from_osm import build_road_graph
 from topoloc.graph.road_graph import RoadGraph
@@ -45,6 +45,8 @@ from topoloc.trajectory.model import load_model
 log = logging.getLogger(__name__)
 
 #: The figures per error type, level and localizer: the oracle's, then :func:`targets`' on the oracle-resolved starts.
+#: The figures of the confirmed resolved starts (:func:`level_table`).
+CONFIRMED = ["confirmed", "localized_confirmed", "ratio_confirmed"]
 FIGURES = ["oracle_resolved", "oracle_median_m", "localized_share", "median_ratio", "accuracy_after",
            "position_error_m", "confident_wrong_all", "ece"]
 #: The levels the issue's calibration targets cover (every error type up to the medium level).
@@ -151,16 +153,12 @@ def table(frame: pd.DataFrame, by: list[str], columns: list[str] | None = None) 
 
 
 def level_table(frame: pd.DataFrame, confirm_m: float) -> pd.DataFrame:
-    """:func:`table` per level and localizer, every error type and map pooled (the issue's targets are per level),
-    with the resolved starts that are *confirmed* (:func:`~topoloc.experiments.many_starts.confirmed`: at least ``confirm_m``
-    of drive after the oracle's limit) and the share of them localized."""
-    out = table(frame, ["level", "localizer"])
-    sure = confirmed(frame[np.isfinite(frame.oracle_m)], confirm_m)
-    keys = list(zip(out.level, out.localizer)) if len(out) else []
-    groups = dict(list(sure.groupby(["level", "localizer"], sort=False)))
-    out["confirmed"] = [len(groups[k]) if k in groups else 0 for k in keys]
-    out["localized_confirmed"] = [float(np.isfinite(groups[k].localized_m).mean()) if k in groups else np.nan for k in keys]
-    return out
+    """:func:`figures` per level and localizer, every error type and map pooled (the targets are per level), with
+    :func:`~topoloc.experiments.many_starts.confirmed_figures` (the resolved starts with at least ``confirm_m`` of
+    drive after the oracle's limit)."""
+    rows = [{"level": level, "localizer": name, **figures(group), **confirmed_figures(group, confirm_m)}
+            for (level, name), group in frame.groupby(["level", "localizer"], sort=False)]
+    return pd.DataFrame(rows, columns=["level", "localizer", "starts", *FIGURES, *CONFIRMED])
 
 
 def report(frame: pd.DataFrame, seconds: dict[str, float]) -> str:

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from topoloc.experiments.map_error_starts import FIGURES, UP_TO_MEDIUM, figures, level_table, localize_error, report
+from topoloc.experiments.map_error_starts import CONFIRMED, FIGURES, UP_TO_MEDIUM, figures, level_table, localize_error, report
 from topoloc.experiments.summary import write_summary
 from topoloc.io import write_json, write_text
 from topoloc.localization import calibration
@@ -90,5 +90,5 @@ def summarize(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, s
                for f in FIGURES if np.isfinite(getattr(r, f))}
     levels = level_table(pd.concat(frames, ignore_index=True), float(conf["confirm_m"]))  # the targets are per level
     metrics |= {f"{r.localizer}/all_errors/{r.level}/{f}": float(getattr(r, f)) for r in levels.itertuples()
-                for f in [*FIGURES, "localized_confirmed"] if np.isfinite(getattr(r, f))}
+                for f in [*FIGURES, *CONFIRMED] if np.isfinite(getattr(r, f))}
     return metrics | {f"{name}/up_to_medium/ece": value for name, value in pooled_ece.items() if np.isfinite(value)}
