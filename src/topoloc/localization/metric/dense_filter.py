@@ -191,6 +191,8 @@ class MetricFilter:
         parts = [self._keep(~mine)]
         group, cell, weight, kappa, mean = self._keep(mine)
         for k, share in enumerate(self.model.class_prior):
+            # a double share makes the weights double from here on (the bank's entries share their arrays); single
+            # weights would change near-tie answers in the last bits (docs/localization.md), so they stay so
             parts.append((group - self.center + k, cell, weight * share, kappa, mean))
         self._set(*(np.concatenate(p) for p in zip(*parts)))
         self.split[ready] = True
@@ -250,6 +252,10 @@ class MetricFilter:
         kappa = kappa / (1.0 + kappa * model.drift[cell])  # the offset diffuses: variance 1 / kappa + drift
         mean = np.where(length > 0, resultant / np.maximum(length, TINY), 1.0)
         still = ~movers[self.group]
+        if not still.any():  # every group moved (the common case): no copy, the dtypes a concatenation would give
+            self._set(*(b.astype(np.result_type(a, b), copy=False)
+                        for a, b in zip((self.group, self.cell, self.weight, self.kappa, self.mean), (group, cell, weight, kappa, mean))))
+            return
         self.group, self.cell, self.weight, self.kappa, self.mean = (
             np.concatenate([a[still], b]) for a, b in zip((self.group, self.cell, self.weight, self.kappa, self.mean),
                                                           (group, cell, weight, kappa, mean)))
@@ -293,7 +299,8 @@ class MetricFilter:
         self.weight = weight / total[filt].astype(REAL)
         self.offmap = offmap / total
         keep = self.weight >= (self.prune * self._filter_max(self.weight))[filt].astype(REAL)
-        self.group, self.cell, self.weight, self.kappa, self.mean = self._keep(keep)
+        if not keep.all():
+            self._set(*self._keep(keep))
         self._split()
         self._remember(direction, yaw)
 
