@@ -31,6 +31,7 @@ TWO_PI = 2.0 * math.pi
 TINY = float(np.finfo(np.float32).tiny)
 #: Precision of the belief: single precision is ample for probabilities renormalized every step and for headings
 #: (a cosine to 6e-8), and makes the elementwise work of a step three to four times faster than double.
+#: (The weights turn double where a filter splits into its scale classes: :meth:`MetricFilter._split`.)
 REAL, COMPLEX = np.float32, np.complex64
 #: At most this many entries when a filter splits into its scale classes (maps of up to 131,072 cells split at a
 #: 32nd of the map; a city map's split belief would otherwise hold hundreds of thousands of entries).
