@@ -29,7 +29,7 @@ self-localization", CVPR 2013; PAMI 2016), on our cells (:mod:`topoloc.localizat
   road's peak wherever it is widened. Curves therefore count as much as corners, and driving straight
   through an intersection gives no false turn. Each observation also sharpens ``theta``.
 * **Off the map**: the off-map state predicts the heading without a map: the last one plus the
-  noise of two observations, or, with ``offmap_turn_prob``, anything (a turn). It wins where the
+  noise of two observations (times ``offmap_spread``), or, with ``offmap_turn_prob``, anything (a turn). It wins where the
   drive turns as no road does and loses where a road explains the turn; mass moves there with
   ``leave_prob`` per step and comes back, spread over the whole map, with ``enter_prob``. A drive
   the map cannot explain ends there (low confidence) instead of collapsing onto a wrong road, and

@@ -62,6 +62,7 @@ class MetricSettings:
     lateral_offset_m: float = 0.0
     turn_spread: str = "density"
     bend_spread: bool = True
+    offmap_spread: float = 1.0
 
     @classmethod
     def from_conf(cls, conf: dict) -> MetricSettings:
@@ -114,7 +115,7 @@ class MetricModel:
         cells_of_chain = np.diff(grid.base)[grid.chain]
         self.drift = (drift + np.where(on_turn, np.radians(settings.node_offset_deg) ** 2 / np.maximum(cells_of_chain, 1), 0.0)).astype(np.float32)
         # off the map the heading is its last value plus the noise of two observations, or anything (a turn)
-        self.offmap_kappa = 1.0 / (2.0 * sigma**2)
+        self.offmap_kappa = 1.0 / (2.0 * (settings.offmap_spread * sigma) ** 2)
         self.floor_density = settings.floor / TWO_PI
         k = max(1, int(settings.scale_classes))
         self.scales = np.linspace(-settings.scale_error_max, settings.scale_error_max, k) if k > 1 else np.zeros(1)
