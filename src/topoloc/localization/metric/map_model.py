@@ -114,7 +114,7 @@ class MetricModel:
         on_turn = grid.chains.second_state[grid.chain] >= 0
         cells_of_chain = np.diff(grid.base)[grid.chain]
         self.drift = (drift + np.where(on_turn, np.radians(settings.node_offset_deg) ** 2 / np.maximum(cells_of_chain, 1), 0.0)).astype(np.float32)
-        # off the map the heading is its last value plus the noise of two observations, or anything (a turn)
+        # off the map the heading is its last value plus the noise of two observations (times offmap_spread), or anything
         self.offmap_kappa = 1.0 / (2.0 * (settings.offmap_spread * sigma) ** 2)
         self.floor_density = settings.floor / TWO_PI
         k = max(1, int(settings.scale_classes))
