@@ -18,7 +18,7 @@ BENCHMARKS = sorted(p.stem for p in (REPO / "benchmarks").glob("bench_*.py"))
 
 
 def test_the_benchmarks_are_there():
-    assert len(BENCHMARKS) == 16 and {"bench_odometry", "bench_real_drives", "bench_viewer", "bench_map_errors",
+    assert len(BENCHMARKS) == 17 and {"bench_odometry", "bench_real_drives", "bench_viewer", "bench_map_errors",
                                       "bench_filter_recovery", "bench_lane_offset", "bench_drive_maps"} <= set(BENCHMARKS)
 
 

@@ -1,0 +1,31 @@
+"""The labels and scores of ``benchmarks.bench_lane_perception``: the lane's offset and heading read off a recorded
+local path, and the scores of a perfect and of a constant answer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from benchmarks.bench_lane_perception import lane_pose, scores
+
+
+def test_the_lane_pose_of_a_recorded_path():
+    ahead = np.arange(1.0, 21.0)
+    yaw = np.radians(10.0)  # a straight lane 1.2 m to the left, turned 10 deg left of the vehicle's heading
+    path = np.column_stack([ahead * np.cos(yaw) - 1.2 * np.sin(yaw), 1.2 * np.cos(yaw) + ahead * np.sin(yaw)])
+    right = path * np.array([1.0, -1.0])  # the mirror image: to the right, turned right
+    pose = lane_pose(np.stack([path, right]).astype(np.float32))
+    assert pose[0, 0] == pytest.approx(1.2 * np.cos(yaw), abs=1e-4)  # the y of the lane point at the vehicle
+    assert pose[0, 1] == pytest.approx(yaw, abs=1e-4)
+    assert np.allclose(pose[1], -pose[0], atol=1e-5)
+
+
+def test_scores_tell_a_perfect_answer_from_a_constant_one():
+    rng = np.random.default_rng(0)
+    truth = np.column_stack([rng.normal(0, 1.0, 200), rng.normal(0, 0.1, 200)])
+    perfect = scores(truth, truth)
+    assert perfect["offset_corr"] == pytest.approx(1.0) and perfect["offset_rmse"] == pytest.approx(0.0)
+    assert perfect["heading_rmse"] == pytest.approx(0.0) and perfect["heading_sd"] == pytest.approx(np.degrees(truth[:, 1].std()))
+    constant = scores(np.column_stack([np.full(200, 0.01), np.zeros(200)]) + rng.normal(0, 1e-6, (200, 2)), truth)
+    assert abs(constant["offset_corr"]) < 0.3
+    assert constant["offset_rmse"] == pytest.approx(constant["offset_sd"], rel=0.05)
