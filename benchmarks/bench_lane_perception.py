@@ -10,8 +10,10 @@ from scratch on the demonstrations' images alone, supervised directly with the v
 lane to the left) and the lane's heading 1-2 m ahead in the vehicle frame (what Topo-LP must read from its image to
 follow a path: docs/route_following.md, "The map's path is enough"). Batches of ``drive.train.batch_size`` from the
 training routes, Adam at ``drive.train.lr``; after each budget of ``--steps``: the correlation and the RMS error on
-the validation route and on as many training steps, beside the labels' spread (a head that always answers the mean
-has an RMS error of the spread and no correlation).
+the validation routes (the last ``--val-share`` of them) and on as many training steps, beside the labels' spread (a head that always answers the mean
+has an RMS error of the spread and no correlation). ``--against road`` scores the offset of the nearest map road's
+centre line instead of the lane's: the expert keeps a quarter of the carriageway right of a dashed centre line and
+the middle of any other road, so the lane's offset also asks whether that thin line is there.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import argparse
 from pathlib import Path
 
 import numpy as np
+import shapely
 import torch
 from torch import nn
 from torch.nn import functional as F
@@ -28,6 +31,7 @@ from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import load
 from topoloc.drive.controller_training import build_model
 from topoloc.drive.demonstrations import Demonstrations
+from topoloc.graph.road_graph import RoadGraph
 from topoloc.place.network import augment
 
 
@@ -37,6 +41,17 @@ def lane_pose(path: np.ndarray) -> np.ndarray:
     at_vehicle = 2.0 * path[:, 0] - path[:, 1]
     tangent = path[:, 1] - path[:, 0]
     return np.column_stack([at_vehicle[:, 1], np.arctan2(tangent[:, 1], tangent[:, 0])]).astype(np.float32)
+
+
+def road_middle_offset(graph: RoadGraph, xy: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """``(n,)``: the offset (m, + left) of the nearest map road's centre line from each pose ``xy`` (map metres) with
+    heading ``yaw`` (rad): what the road's edges show, whatever lane the expert keeps on it."""
+    lines = [shapely.LineString(c) for c in graph.geometry]
+    points = shapely.points(xy)
+    nearest = shapely.STRtree(lines).nearest(points)
+    foot = np.array([np.asarray(lines[e].interpolate(lines[e].project(p)).coords[0]) for e, p in zip(nearest, points)])
+    d = foot - xy
+    return (-np.sin(yaw) * d[:, 0] + np.cos(yaw) * d[:, 1]).astype(np.float32)
 
 
 def scores(predicted: np.ndarray, truth: np.ndarray) -> dict[str, float]:
@@ -68,6 +83,10 @@ def main() -> None:
     parser.add_argument("--configfile", default="config/config.yaml")
     parser.add_argument("--demonstrations", help="default: results/<region>/drive/demonstrations.npz")
     parser.add_argument("--steps", default="400,1600", help="training budgets (batches) to score after, ascending")
+    parser.add_argument("--against", choices=("lane", "road"), default="lane",
+                        help="the offset of the expert's lane, or of the nearest map road's centre line")
+    parser.add_argument("--val-share", type=float, help="validate on this share of the routes, the last ones (default: "
+                        "drive.demonstrations.val_routes of them; one route is a noisy score)")
     add_out_option(parser, "bench_lane_perception")
     args = parser.parse_args()
     torch.set_num_threads(2)
@@ -77,7 +96,14 @@ def main() -> None:
         path = Path(args.demonstrations or Path("results") / config["region"]["name"] / "drive" / "demonstrations.npz")
         demos = Demonstrations.load(path)
         labels = lane_pose(demos.path)
-        val = np.flatnonzero(demos.route >= demos.route.max() + 1 - int(drive["demonstrations"]["val_routes"]))
+        if args.against == "road":
+            graph = RoadGraph.load(Path("results") / config["region"]["name"] / "graph" / "graph.graphml")
+            labels[:, 0] = road_middle_offset(graph, demos.xy, demos.yaw)
+        routes = int(demos.route.max()) + 1
+        held = int(drive["demonstrations"]["val_routes"]) if args.val_share is None else round(args.val_share * routes)
+        if not 1 <= held < routes:
+            raise SystemExit(f"--val-share: {held} of {routes} routes held out; hold out at least one and not all")
+        val = np.flatnonzero(demos.route >= routes - held)
         train = np.setdiff1d(np.arange(len(demos)), val)
         rng = np.random.default_rng(int(drive["train"]["seed"]))
         seen_train = rng.choice(train, min(len(val), len(train)), replace=False)
@@ -92,8 +118,9 @@ def main() -> None:
         def images(idx: np.ndarray) -> torch.Tensor:
             return model.controller._shrink(torch.from_numpy(demos.images[idx]).permute(0, 3, 1, 2).float())
 
-        print(f"# Lane perception of the controllers' encoder ({path}, {len(train)} training and {len(val)} "
-              f"validation steps, {tuple(demos.images.shape[1:])} images, downsample {drive['network']['downsample']})\n")
+        print(f"# Lane perception of the controllers' encoder, offset of the {args.against} ({path}: {routes - held} training routes, {len(train)} "
+              f"steps; {held} validation routes, {len(val)} steps; {tuple(demos.images.shape[1:])} images, downsample "
+              f"{drive['network']['downsample']})\n")
         print("| steps | set | offset corr | offset RMS (m) | offset spread (m) | heading corr | heading RMS (deg) | "
               "heading spread (deg) |\n|---|---|---|---|---|---|---|---|")
         for budget in sorted(int(s) for s in args.steps.split(",")):

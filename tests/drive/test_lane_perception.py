@@ -1,12 +1,12 @@
 """The labels and scores of ``benchmarks.bench_lane_perception``: the lane's offset and heading read off a recorded
-local path, and the scores of a perfect and of a constant answer."""
+local path, the offset of the nearest road's centre line, and the scores of a perfect and of a constant answer."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from benchmarks.bench_lane_perception import lane_pose, scores
+from benchmarks.bench_lane_perception import lane_pose, road_middle_offset, scores
 
 
 def test_the_lane_pose_of_a_recorded_path():
@@ -29,3 +29,15 @@ def test_scores_tell_a_perfect_answer_from_a_constant_one():
     constant = scores(np.column_stack([np.full(200, 0.01), np.zeros(200)]) + rng.normal(0, 1e-6, (200, 2)), truth)
     assert abs(constant["offset_corr"]) < 0.3
     assert constant["offset_rmse"] == pytest.approx(constant["offset_sd"], rel=0.05)
+
+
+def test_the_road_middle_offset_is_signed_left_of_the_pose(straight_road):
+    graph = straight_road["graph"]
+    coords = graph.geometry[0]
+    mid = coords[[0, -1]].mean(axis=0)  # the middle of the road's first edge: the side street is 30 m or more away
+    heading = np.arctan2(*(coords[-1] - coords[0])[::-1])
+    normal = np.array([-np.sin(heading), np.cos(heading)])  # left of the road's direction
+    xy = np.stack([mid - 1.5 * normal, mid + 2.0 * normal])
+    offset = road_middle_offset(graph, xy, np.full(2, heading))
+    assert offset == pytest.approx([1.5, -2.0], abs=0.05)
+    assert road_middle_offset(graph, xy[:1], np.array([heading + np.pi]))[0] == pytest.approx(-1.5, abs=0.05)  # facing back
