@@ -26,6 +26,7 @@ import shapely
 import torch
 from torch import nn
 from torch.nn import functional as F
+from tqdm import tqdm
 
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import load
@@ -69,8 +70,7 @@ class LanePerception(nn.Module):
 
     def __init__(self, drive: dict, demos: Demonstrations) -> None:
         super().__init__()
-        controller = build_model(drive, demos, "dlm")
-        self.controller = controller
+        self.controller = build_model(drive, demos, "dlm")
         self.head = nn.Sequential(nn.Linear(int(drive["network"]["hidden"]), 64), nn.ReLU(inplace=True), nn.Linear(64, 2))
 
     def forward(self, images: torch.Tensor) -> torch.Tensor:
@@ -118,14 +118,14 @@ def main() -> None:
         def images(idx: np.ndarray) -> torch.Tensor:
             return model.controller._shrink(torch.from_numpy(demos.images[idx]).permute(0, 3, 1, 2).float())
 
-        print(f"# Lane perception of the controllers' encoder, offset of the {args.against} ({path}: {routes - held} training routes, {len(train)} "
-              f"steps; {held} validation routes, {len(val)} steps; {tuple(demos.images.shape[1:])} images, downsample "
+        print(f"# Lane perception of the controllers' encoder, offset of the {args.against} ({path}: {routes - held} "
+              f"training routes, {len(train)} steps; {held} validation routes, {len(val)} steps; {tuple(demos.images.shape[1:])} images, downsample "
               f"{drive['network']['downsample']})\n")
         print("| steps | set | offset corr | offset RMS (m) | offset spread (m) | heading corr | heading RMS (deg) | "
               "heading spread (deg) |\n|---|---|---|---|---|---|---|---|")
         for budget in sorted(int(s) for s in args.steps.split(",")):
             model.train()
-            for _ in range(budget - done):
+            for _ in tqdm(range(budget - done), desc=f"training to {budget} steps", unit="batch", mininterval=5.0):
                 idx = rng.choice(train, batch)
                 x = images(idx)
                 if drive["train"]["augment"]:
