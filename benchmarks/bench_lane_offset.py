@@ -66,16 +66,23 @@ class PathOracle:
     def __init__(self, topo: TopometricMap, sim: Simulator, expert: Expert) -> None:
         self.topo, self.sim, self.expert = topo, sim, expert
         self.arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(topo.gt_xy, axis=0).T))])
+        self._paths: dict[int, np.ndarray] = {}
 
-    def act(self, image: np.ndarray, speed: float, vertex: int) -> Control:
+    def _placed(self, vertex: int) -> np.ndarray:
+        """The vertex's local path (map metres) at the vertex's true pose."""
         gt, at = self.topo.gt_xy, self.arc[vertex]
         ahead = np.array([np.interp(at + 2.0, self.arc, gt[:, 0]), np.interp(at + 2.0, self.arc, gt[:, 1])])
         yaw = float(np.arctan2(*(ahead - gt[vertex])[::-1]))  # the heading map_path's frame takes: the chord 2 m on
         local = map_path(self.topo.xy, vertex)
         c, s = np.cos(yaw), np.sin(yaw)
-        world = gt[vertex] + np.column_stack([local[:, 0] * c - local[:, 1] * s, local[:, 0] * s + local[:, 1] * c])
+        return gt[vertex] + np.column_stack([local[:, 0] * c - local[:, 1] * s, local[:, 0] * s + local[:, 1] * c])
+
+    def act(self, image: np.ndarray, speed: float, vertex: int) -> Control:
+        if vertex not in self._paths:
+            self._paths[vertex] = self._placed(vertex)
         state = self.sim.state
-        return Control(_pursuit(world, state, self.sim.spec, self.expert.settings), self.expert.control(state).throttle)
+        return Control(_pursuit(self._paths[vertex], state, self.sim.spec, self.expert.settings),
+                       self.expert.control(state).throttle)
 
 
 def drive_once(conf: dict, root: Path, agent: str, condition: str) -> tuple[pd.DataFrame, str]:

@@ -41,3 +41,11 @@ def test_the_road_middle_offset_is_signed_left_of_the_pose(straight_road):
     offset = road_middle_offset(graph, xy, np.full(2, heading))
     assert offset == pytest.approx([1.5, -2.0], abs=0.05)
     assert road_middle_offset(graph, xy[:1], np.array([heading + np.pi]))[0] == pytest.approx(-1.5, abs=0.05)  # facing back
+
+
+def test_the_lane_offset_is_the_recorded_lateral_offset(straight_demos):
+    """The benchmark reads the offset off the recorded path; the recorder's own ``lateral`` (+ right of the lane: the lane
+    to the left) says the same, side views and noise injection included."""
+    offset = lane_pose(straight_demos.path)[:, 0]
+    assert np.abs(straight_demos.lateral).max() > 0.5  # the side views and the perturbations leave the lane
+    assert np.abs(offset - straight_demos.lateral).max() < 0.1
