@@ -8,10 +8,13 @@ import numpy as np
 from topoloc.drive.local_path import (
     PATH_PX,
     PLANE_POINTS,
+    aligned_path,
+    chain_frame,
     lane_frame_path,
     map_path,
     path_plane,
     raster,
+    vehicle_frame_path,
 )
 
 
@@ -66,3 +69,37 @@ def test_the_plane_holds_the_image_and_the_points_ahead():
     np.testing.assert_array_equal(plane[:PATH_PX], raster(points))
     np.testing.assert_allclose(plane[PATH_PX].reshape(-1, 2), points[1:PLANE_POINTS + 1], atol=1e-5)
     assert plane[PATH_PX, 2 * 15 + 1] > 3.0  # 16 m ahead, 11 m into the left bend of 8 m radius
+
+
+def test_the_aligned_path_is_the_maps_path_seen_from_where_the_vehicle_stands():
+    road = _arc(12.0)
+    origin, yaw = chain_frame(road, 3)
+    np.testing.assert_allclose(aligned_path(road, 3, origin, yaw), map_path(road, 3), atol=1e-9)
+    # 1.5 m right of the chain and turned 10 deg left: the path starts 1.5 m to the left and runs off to the right.
+    right = np.array([np.sin(yaw), -np.cos(yaw)])
+    seen = aligned_path(road, 3, origin + 1.5 * right, yaw + np.radians(10.0))
+    assert abs(seen[0, 0]) < 0.3 and 1.4 < seen[0, 1] < 1.6
+    assert seen[5, 1] < seen[0, 1] - 0.5
+    # The demonstrations' lane path in the vehicle frame gives the same path for the same pose.
+    vehicle = _vehicle_frame(road[4:24], origin + 1.5 * right, yaw + np.radians(10.0))
+    np.testing.assert_allclose(vehicle_frame_path(vehicle)[:15], seen[:15], atol=0.1)
+
+
+def test_the_aligned_path_does_not_follow_the_chain_back_through_a_fold():
+    # A teach drive that went 10 m east, turned back on itself and went 10 m west 2 m further north.
+    out = np.column_stack([np.arange(0.0, 11.0), np.zeros(11)])
+    back = np.column_stack([np.arange(10.0, -31.0, -1.0), np.full(41, 2.0)])
+    chain = np.vstack([out, [[10.5, 1.0]], back])
+    vertex = 13  # on the way back, 9 m east (2.2 m of chain past the turn)
+    # The vehicle stands on the way out, nearer the chain behind the vertex than the chain ahead of it.
+    path = aligned_path(chain, vertex, np.array([7.5, 0.2]), np.pi)
+    assert path[0, 1] < -1.0  # the way back, 2 m north: to the vehicle's right when it faces west
+
+
+def test_vehicle_frame_noise_moves_the_path_as_the_pose_error_does():
+    lane = np.column_stack([np.arange(1.0, 21.0), np.zeros(20)]).astype(np.float32)
+    np.testing.assert_allclose(vehicle_frame_path(lane)[:, 1], 0.0, atol=1e-9)
+    left = vehicle_frame_path(lane, 0.0, 0.4, 0.0)  # a pose estimate 0.4 m left: the lane seems 0.4 m right
+    np.testing.assert_allclose(left[:, 1], -0.4, atol=1e-9)
+    turned = vehicle_frame_path(lane, 0.0, 0.0, np.radians(5.0))  # turned left: the lane bends away to the right
+    assert turned[10, 1] < -0.8

@@ -8,6 +8,10 @@
   frame, :data:`topoloc.drive.demonstrations.LOCAL_PATH_M` metres every metre): re-expressed in the frame of the
   lane point at the vehicle's progress shifted by ``shift_m`` and turned by ``yaw_rad``, the localization error the
   paper adds to the path in training.
+* **In the vehicle's frame** (``drive.network.path_frame: aligned``, a deviation from the paper): in closed loop
+  (:func:`aligned_path`) the same chain from the point nearest the vehicle, in the vehicle's frame as
+  :class:`topoloc.drive.ground_alignment.PoseTracker` estimates it; in training (:func:`vehicle_frame_path`) the
+  lane path from the point nearest a frame moved from the vehicle's by the tracker's error.
 * **Raster** (:func:`raster`): ``PATH_PX`` x ``PATH_PX`` pixels, ``PATH_AHEAD_M`` metres ahead (bottom row: the
   reference point) and half that to either side, the path drawn as a one-pixel anti-aliased line.
 * **Plane** (:func:`path_plane`): what Topo-LP is told, ``PATH_PX + 1`` rows of ``PATH_PX``: the raster on top and,
@@ -60,12 +64,85 @@ def lane_frame_path(path: NDArray[np.float32], shift_m: float = 0.0, yaw_rad: fl
     return _reframed(pts, np.arange(len(pts), dtype=float), float(shift_m), float(yaw_rad))
 
 
-def map_path(xy: NDArray[np.float64], vertex: int) -> NDArray[np.float64]:
-    """The map chain's next metres from ``vertex`` in that vertex's frame (see the module docstring)."""
+def _chain(xy: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The chain's points without repeats (a stop has no heading) and their arc lengths."""
     xy = np.asarray(xy, float)
     arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
-    keep = np.concatenate([[True], np.diff(arc) > 1e-6])  # repeated positions (a stop) have no heading
-    return _reframed(xy[keep], arc[keep], float(arc[int(vertex)]), 0.0)
+    keep = np.concatenate([[True], np.diff(arc) > 1e-6])
+    return xy[keep], arc[keep]
+
+
+def _vertex_arc(xy: NDArray[np.float64], vertex: int) -> float:
+    """The arc length of vertex ``vertex`` along the chain."""
+    steps = np.hypot(*np.diff(np.asarray(xy, float), axis=0).T)
+    return float(steps[: int(vertex)].sum())
+
+
+def chain_frame(xy: NDArray[np.float64], vertex: int) -> tuple[NDArray[np.float64], float]:
+    """The frame :func:`map_path` expresses vertex ``vertex``'s path in: its point on the chain and the heading (rad)
+    of the chord to the chain 2 m on."""
+    points, arc = _chain(xy)
+    ahead = _along(points, arc, _vertex_arc(xy, vertex) + np.array([0.0, 2.0 * _STEP_M]))
+    return ahead[0], float(np.arctan2(*(ahead[1] - ahead[0])[::-1]))
+
+
+def map_path(xy: NDArray[np.float64], vertex: int) -> NDArray[np.float64]:
+    """The map chain's next metres from ``vertex`` in that vertex's frame (see the module docstring)."""
+    origin, yaw = chain_frame(xy, vertex)
+    points, arc = _chain(xy)
+    start = _vertex_arc(xy, vertex)
+    return _in_frame(_along(points, arc, start + np.arange(0.0, PATH_AHEAD_M + _STEP_M, _STEP_M)), origin, yaw)
+
+
+def _nearest_arc(points: NDArray[np.float64], arc: NDArray[np.float64], at: NDArray[np.float64], lo: float,
+                 hi: float) -> float:
+    """The arc length of the polyline's point nearest ``at`` among its segments between arc lengths ``lo`` and ``hi``."""
+    a, b = points[:-1], points[1:]
+    d = b - a
+    t = np.clip(((at - a) * d).sum(axis=1) / np.maximum((d * d).sum(axis=1), 1e-12), 0.0, 1.0)
+    foot = a + t[:, None] * d
+    s = arc[:-1] + t * (arc[1:] - arc[:-1])
+    dist = np.where((s >= lo) & (s <= hi), np.hypot(*(foot - at).T), np.inf)
+    return float(s[int(np.argmin(dist))]) if np.isfinite(dist).any() else float(np.clip(lo, arc[0], arc[-1]))
+
+
+def _ahead_in_frame(points: NDArray[np.float64], arc: NDArray[np.float64], origin: NDArray[np.float64], yaw: float,
+                    lo: float, hi: float) -> NDArray[np.float64]:
+    """The polyline's next ``PATH_AHEAD_M`` metres, every metre, from its point nearest ``origin`` (between arc lengths
+    ``lo`` and ``hi``), in the frame at ``origin`` with heading ``yaw``."""
+    start = _nearest_arc(points, arc, np.asarray(origin, float), lo, hi)
+    return _in_frame(_along(points, arc, start + np.arange(0.0, PATH_AHEAD_M + _STEP_M, _STEP_M)), origin, yaw)
+
+
+def aligned_path(xy: NDArray[np.float64], vertex: int, centre: NDArray[np.float64], yaw: float,
+                 behind_m: float = 3.0, ahead_m: float = 10.0) -> NDArray[np.float64]:
+    """The map chain's next metres from its point nearest the vehicle (``centre``, ``yaw`` in the chain's
+    coordinates), in the vehicle's frame. The point is sought from ``behind_m`` before vertex ``vertex`` to
+    ``ahead_m`` after it: where the teach drive folded back on itself (a tight turn taken wide), the chain behind
+    the vertex can pass nearer the vehicle than the chain it is to follow."""
+    points, arc = _chain(xy)
+    at = _vertex_arc(xy, vertex)
+    return _ahead_in_frame(points, arc, centre, yaw, at - behind_m, at + ahead_m)
+
+
+def vehicle_frame_path(path: NDArray[np.float32], forward_m: float = 0.0, left_m: float = 0.0,
+                       yaw_rad: float = 0.0) -> NDArray[np.float64]:
+    """A demonstration step's local path (vehicle frame, points 1, 2, ... m ahead on the lane) from its point nearest
+    a frame ``forward_m`` ahead of and ``left_m`` left of the vehicle, turned by ``yaw_rad``, in that frame."""
+    pts = np.asarray(path, float)
+    pts = np.vstack([2.0 * pts[0] - pts[1], pts])  # the lane point at the vehicle's progress
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    return _ahead_in_frame(pts, arc, np.array([forward_m, left_m]), float(yaw_rad), -np.inf, np.inf)
+
+
+def path_input(path: np.ndarray, frame: str, forward_m: float = 0.0, left_m: float = 0.0,
+               yaw_rad: float = 0.0) -> np.ndarray:
+    """Topo-LP's local-path plane of a recorded lane path (vehicle frame) in ``frame`` (``drive.network.path_frame``):
+    ``lane``, the lane's frame ``forward_m`` along it and turned by ``yaw_rad`` (``left_m`` unused); ``aligned``, the
+    vehicle's frame moved by ``forward_m``, ``left_m`` and turned by ``yaw_rad``."""
+    if frame == "aligned":
+        return path_plane(vehicle_frame_path(path, forward_m, left_m, yaw_rad))
+    return path_plane(lane_frame_path(path, forward_m, yaw_rad))
 
 
 def raster(points: NDArray[np.float64]) -> NDArray[np.uint8]:
