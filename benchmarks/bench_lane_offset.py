@@ -30,7 +30,7 @@ import torch
 
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import load
-from topoloc.drive.agents import DLMAgent, LPAgent
+from topoloc.drive.agents import DLMAgent, LPAgent, TeachImages
 from topoloc.drive.camera import image_shape
 from topoloc.drive.controller import AGENT_NAMES, load_controller
 from topoloc.drive.demonstrations import as_input
@@ -103,7 +103,8 @@ def drive_once(conf: dict, root: Path, agent: str, condition: str) -> tuple[pd.D
     else:
         model = load_controller(root / "drive" / agent / "controller.ckpt", image_shape(conf), "drive.camera",
                                 CONTROLLERS[agent])
-        controller = (LPAgent if agent == "lp" else DLMAgent)(model, part.topo)
+        teach = TeachImages(sim, part.topo, place["teach_condition"], int(drive["seed"]), bool(place["image"]["color"]))
+        controller = LPAgent(model, part.topo, teach) if agent == "lp" else DLMAgent(model, part.topo)
     localization, gain = GroundTruth(part.lane_s), float(drive["expert"]["speed_gain"])
     oneway = graph.edges.oneway.to_numpy() != 0
     obs, status, rows = sim.reset(condition, int(drive["seed"])), RUNNING, []

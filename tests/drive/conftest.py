@@ -11,7 +11,7 @@ import torch
 from tests.conftest import make_config, write_osm
 from tests.render.conftest import lonlat, town  # noqa: F401 (the town fixture, re-exported)
 from topoloc.drive.controller import WAYPOINT_SCALE_M, TopoDLM, waypoint_targets
-from topoloc.drive.controller_training import DemoData, fit
+from topoloc.drive.controller_training import DemoData, fit, path_noise
 from topoloc.drive.demonstrations import LOCAL_PATH_M, Demonstrations, record
 from topoloc.drive.drive_route import DriveRoute, build_route
 from topoloc.drive.expert import Expert, ExpertSettings, NoiseSettings
@@ -128,9 +128,8 @@ CORRECTION_STEER = 0.1
 
 
 def _val_data(drive: dict, demos: Demonstrations, agent: str) -> DemoData:
-    noise = {k: float(v) for k, v in drive["path_noise"].items()} if agent == "lp" else None
     return DemoData(demos, int(drive["demonstrations"]["val_routes"]), drive["train"],
-                    float(drive["vehicle"]["max_speed_mps"]), noise)
+                    float(drive["vehicle"]["max_speed_mps"]), path_noise(drive, agent))
 
 
 def zero_answer_errors(drive: dict, demos: Demonstrations) -> dict[str, float]:

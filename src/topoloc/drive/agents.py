@@ -12,9 +12,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from topoloc.drive.controller import AGENT_NAMES
+from topoloc.drive.demonstrations import as_input
 from topoloc.drive.expert import Expert
-from topoloc.drive.local_path import map_path, path_plane
+from topoloc.drive.ground_alignment import GroundAligner, PoseTracker
+from topoloc.drive.local_path import aligned_path, chain_frame, map_path, path_plane
 from topoloc.drive.simulator import Control, Simulator
+from topoloc.drive.topo_lp import path_frame
 from topoloc.place.topometric_map import TopometricMap
 
 
@@ -30,19 +33,51 @@ class DLMAgent:
         return Control(*self.model.act(image, speed, int(self.topo.command[vertex])))
 
 
+class TeachImages:
+    """The controller camera's teach drive at the vertices of ``topo``: the image it took at each vertex's pose (its
+    true position, heading along the chord to 2 m on, as :func:`topoloc.drive.local_path.chain_frame` takes it) under
+    the teach ``condition``, rendered once per vertex."""
+
+    def __init__(self, sim: Simulator, topo: TopometricMap, condition: str, seed: int, color: bool) -> None:
+        self.sim, self.topo, self.color = sim, topo, bool(color)
+        self.renderer = sim.renderer(condition, int(seed))
+        self._images: dict[int, NDArray[np.uint8]] = {}
+
+    def __call__(self, vertex: int) -> NDArray[np.uint8]:
+        if vertex not in self._images:
+            at, yaw = chain_frame(self.topo.gt_xy, vertex)
+            self._images[vertex] = as_input(self.renderer.render(at, yaw, 0), self.color)
+        return self._images[vertex]
+
+
 class LPAgent:
-    """Topo-LP driven by the local path of the localized vertex (:func:`topoloc.drive.local_path.map_path`)."""
+    """Topo-LP driven by the local path of the localized vertex: in the vertex's frame
+    (:func:`topoloc.drive.local_path.map_path`), or, for a Topo-LP trained with ``path_frame: aligned``, in the
+    vehicle's frame as a :class:`topoloc.drive.ground_alignment.PoseTracker` on the ``teach`` images estimates it
+    (:func:`topoloc.drive.local_path.aligned_path`)."""
 
     name = "Topo-LP"
 
-    def __init__(self, model: Any, topo: TopometricMap) -> None:
+    def __init__(self, model: Any, topo: TopometricMap, teach: TeachImages | None = None) -> None:
         self.model, self.topo = model, topo
         self._paths: dict[int, NDArray[np.float32]] = {}
+        self.tracker: PoseTracker | None = None
+        if path_frame(model) == "aligned":
+            if teach is None:
+                raise ValueError("a Topo-LP trained with path_frame: aligned needs the teach drive's images")
+            self.tracker = PoseTracker(GroundAligner(teach.sim.rig), topo.xy, teach, teach.sim.spec)
+        self._last: Control | None = None
 
     def act(self, image: NDArray[np.uint8], speed: float, vertex: int) -> Control:
-        if vertex not in self._paths:
-            self._paths[vertex] = path_plane(map_path(self.topo.xy, vertex))
-        return Control(*self.model.act(image, speed, self._paths[vertex]))
+        if self.tracker is not None:
+            state = self.tracker.update(image, speed, vertex, self._last)
+            plane = path_plane(aligned_path(self.topo.xy, self.tracker.vertex, state.centre(self.tracker.spec), state.yaw))
+        else:
+            if vertex not in self._paths:
+                self._paths[vertex] = path_plane(map_path(self.topo.xy, vertex))
+            plane = self._paths[vertex]
+        self._last = Control(*self.model.act(image, speed, plane))
+        return self._last
 
 
 class ReplayAgent:

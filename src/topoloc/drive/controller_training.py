@@ -25,7 +25,7 @@ from torch.utils.data import DataLoader, Dataset, TensorDataset, WeightedRandomS
 
 from topoloc.drive.controller import TopoDLM, waypoint_targets
 from topoloc.drive.demonstrations import Demonstrations
-from topoloc.drive.local_path import lane_frame_path, path_plane
+from topoloc.drive.local_path import path_input
 from topoloc.drive.on_policy import DaggerSettings, closed_loop_check, collect
 from topoloc.drive.routes import make_simulator, teach_route
 from topoloc.drive.topo_lp import CONTROLLERS
@@ -54,14 +54,16 @@ def _tensors(demos: Demonstrations, idx: np.ndarray, max_speed: float) -> Tensor
 
 
 class PathSteps(Dataset):
-    """Steps with their local-path image (Topo-LP): the lane path in the lane's frame, shifted along it by
-    N(0, ``shift_m``) and turned by N(0, ``yaw_deg``) per draw (the localization error of the paper's training).
-    With ``fixed`` every step keeps one draw (validation: the same data every epoch, so epochs compare)."""
+    """Steps with their local-path image (Topo-LP, :func:`path_input`): the lane path in the lane's frame shifted along
+    it by N(0, ``shift_m``) and turned by N(0, ``yaw_deg``) per draw (the localization error of the paper's
+    training), or in the vehicle's frame (``frame: aligned``) moved by N(0, ``shift_m``) ahead, N(0, ``lateral_m``)
+    aside and turned by N(0, ``yaw_deg``) (the pose tracker's error). With ``fixed`` every step keeps one draw
+    (validation: the same data every epoch, so epochs compare)."""
 
     def __init__(self, demos: Demonstrations, idx: np.ndarray, max_speed: float, shift_m: float, yaw_deg: float,
-                 seed: int, fixed: bool = False) -> None:
+                 seed: int, fixed: bool = False, lateral_m: float = 0.0, frame: str = "lane") -> None:
         self.demos, self.idx, self.target = demos, idx, _targets(demos, idx, max_speed)
-        self.shift_m, self.yaw = float(shift_m), np.radians(float(yaw_deg))
+        self.shift_m, self.yaw, self.lateral_m, self.frame = float(shift_m), np.radians(float(yaw_deg)), float(lateral_m), frame
         self.seed, self.fixed = int(seed), bool(fixed)
         self.rng = np.random.default_rng([seed, 61])
 
@@ -73,7 +75,8 @@ class PathSteps(Dataset):
         rng = np.random.default_rng([self.seed, 61, i]) if self.fixed else self.rng
         shift = float(rng.normal(0.0, self.shift_m)) if self.shift_m else 0.0
         turn = float(rng.normal(0.0, self.yaw)) if self.yaw else 0.0
-        path = path_plane(lane_frame_path(self.demos.path[k], shift, turn))
+        aside = float(rng.normal(0.0, self.lateral_m)) if self.lateral_m and self.frame == "aligned" else 0.0
+        path = path_input(self.demos.path[k], self.frame, shift, aside, turn)
         return (torch.from_numpy(self.demos.images[k]), torch.tensor(self.demos.speed[k]), torch.from_numpy(path),
                 torch.from_numpy(self.target[i]))
 
@@ -82,7 +85,7 @@ class DemoData(L.LightningDataModule):
     """Command-balanced training batches and the validation routes' steps in order."""
 
     def __init__(self, demos: Demonstrations, val_routes: int, train: dict[str, Any], max_speed: float,
-                 path_noise: dict[str, float] | None = None) -> None:
+                 path_noise: dict[str, Any] | None = None) -> None:
         super().__init__()
         routes = np.unique(demos.route)
         if len(routes) <= val_routes:
@@ -112,8 +115,17 @@ class DemoData(L.LightningDataModule):
     def _steps(self, idx: np.ndarray, stream: int) -> Dataset:
         if self.path_noise is None:
             return _tensors(self.demos, idx, self.max_speed)
-        return PathSteps(self.demos, idx, self.max_speed, self.path_noise["shift_m"], self.path_noise["yaw_deg"],
-                         int(self.train_conf["seed"]) * 2 + stream, fixed=stream == 1)
+        noise = self.path_noise
+        return PathSteps(self.demos, idx, self.max_speed, noise["shift_m"], noise["yaw_deg"],
+                         int(self.train_conf["seed"]) * 2 + stream, fixed=stream == 1,
+                         lateral_m=noise.get("lateral_m", 0.0), frame=noise.get("frame", "lane"))
+
+
+def path_noise(drive: dict[str, Any], agent: str) -> dict[str, Any] | None:
+    """What :class:`DemoData` needs of ``drive.path_noise`` and ``drive.network.path_frame`` (None but for Topo-LP)."""
+    if agent != "lp":
+        return None
+    return {k: float(v) for k, v in drive["path_noise"].items()} | {"frame": str(drive["network"]["path_frame"])}
 
 
 def build_model(drive: dict[str, Any], demos: Demonstrations, agent: str = "dlm") -> TopoDLM:
@@ -121,7 +133,8 @@ def build_model(drive: dict[str, Any], demos: Demonstrations, agent: str = "dlm"
     shaped like ``demos``'."""
     net, train = drive["network"], drive["train"]
     h, w, c = demos.images.shape[1:]
-    extra = {"image_dropout": float(train["image_dropout"]), "path_prior": bool(net["path_prior"])} if agent == "lp" else {}
+    extra = {"image_dropout": float(train["image_dropout"]), "path_prior": bool(net["path_prior"]),
+             "path_frame": str(net["path_frame"])} if agent == "lp" else {}
     return CONTROLLERS[agent](**extra, in_channels=c, height=h, width=w, channels=list(net["channels"]),
                    hidden=int(net["hidden"]), downsample=int(net["downsample"]),
                    dropout=float(net["dropout"]), max_speed=float(drive["vehicle"]["max_speed_mps"]),
@@ -133,7 +146,7 @@ def build_model(drive: dict[str, Any], demos: Demonstrations, agent: str = "dlm"
                    min_lookahead_m=float(drive["expert"]["min_lookahead_m"]))
 
 
-def signature_example(demos: Demonstrations, agent: str = "dlm") -> np.ndarray:
+def signature_example(demos: Demonstrations, agent: str = "dlm", frame: str = "lane") -> np.ndarray:
     """Two steps as the logged model's input ``(2, C + 2, H, W)`` float32: image, speed plane, command plane (Topo-DLM)
     or local-path plane (Topo-LP: :func:`topoloc.drive.local_path.path_plane` in its top-left corner)."""
     images = demos.images[:2].astype(np.float32).transpose(0, 3, 1, 2)
@@ -142,7 +155,7 @@ def signature_example(demos: Demonstrations, agent: str = "dlm") -> np.ndarray:
     if agent == "lp":
         planes[:, 1] = 0.0
         for i in range(len(images)):
-            path = path_plane(lane_frame_path(demos.path[i]))[: images.shape[2], : images.shape[3]]
+            path = path_input(demos.path[i], frame)[: images.shape[2], : images.shape[3]]
             planes[i, 1, : path.shape[0], : path.shape[1]] = path
     else:
         planes[:, 1] *= demos.command[:2, None, None]
@@ -158,12 +171,13 @@ def fit(drive: dict[str, Any], demos: Demonstrations, model_path: str, log_model
         raise InputError("controller", f"unknown controller {agent!r} (one of {', '.join(CONTROLLERS)})")
     train = drive["train"]
     torch.set_num_threads(int(drive["threads"]))
-    noise = ({k: float(v) for k, v in drive["path_noise"].items()} if agent == "lp" else None)
+    noise = path_noise(drive, agent)
     data = DemoData(demos, int(drive["demonstrations"]["val_routes"]), train, float(drive["vehicle"]["max_speed_mps"]),
                     noise)
     settings = FitSettings.from_config(train, gradient_clip=1.0, early_stopping_patience=None, sanity_val_steps=0,
                                        fast_dev_run=fast_dev_run)
-    logged = LoggedModel(signature_example(demos, agent), free_axes=1) if log_model else None
+    logged = (LoggedModel(signature_example(demos, agent, str(drive["network"]["path_frame"])), free_axes=1)
+              if log_model else None)
     if init is not None:
         init.train()  # a loaded or acted-with model is in eval mode, and Lightning keeps a module's mode
     result = fit_module(lambda: init if init is not None else build_model(drive, demos, agent), data, settings, model_path,

@@ -38,15 +38,22 @@ import pandas as pd
 import torch
 from tqdm import tqdm
 
-from topoloc.drive.agents import DLMAgent, ExpertAgent, LPAgent, ReplayAgent, method_name
+from topoloc.drive.agents import (
+    DLMAgent,
+    ExpertAgent,
+    LPAgent,
+    ReplayAgent,
+    TeachImages,
+    method_name,
+)
 from topoloc.drive.camera import image_shape, place_window
 from topoloc.drive.controller import load_controller
 from topoloc.drive.episodes import run_episode, speed_limit_ahead, teach_controls
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.follow_report import write_follow_report
 from topoloc.drive.junctions import junction_results, roundabout_ways, route_junctions
-from topoloc.drive.movie import write_movie
 from topoloc.drive.localization_adapters import GroundTruth, PlaceLocalization
+from topoloc.drive.movie import write_movie
 from topoloc.drive.repeat_routes import intersections, repeat_routes
 from topoloc.drive.routes import make_simulator, teach_route
 from topoloc.drive.topo_lp import CONTROLLERS
@@ -102,7 +109,8 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         expert = Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"]))
         teach_steer, teach_speed = teach_controls(sim, expert, place["teach_condition"], int(drive["seed"]), lane_s)
         limit = None if ahead is None else speed_limit_ahead(teach_speed, lane_s, float(ahead))
-        agents = {"dlm": partial(DLMAgent, controllers.get("dlm"), topo), "lp": partial(LPAgent, controllers.get("lp"), topo),
+        teach = TeachImages(sim, topo, place["teach_condition"], int(drive["seed"]), bool(place["image"]["color"]))
+        agents = {"dlm": partial(DLMAgent, controllers.get("dlm"), topo), "lp": partial(LPAgent, controllers.get("lp"), topo, teach),
                   "replay": partial(ReplayAgent, teach_steer, teach_speed, float(drive["expert"]["speed_gain"])),
                   "expert": partial(ExpertAgent, expert, sim)}
         junctions = route_junctions(graph, route, roundabouts, float(jconf["cluster_m"]), float(jconf["around_m"]))

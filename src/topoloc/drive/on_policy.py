@@ -46,8 +46,9 @@ from topoloc.drive.demonstrations import (
 )
 from topoloc.drive.drive_route import DriveRoute
 from topoloc.drive.expert import Expert, ExpertSettings
-from topoloc.drive.local_path import lane_frame_path, path_plane
+from topoloc.drive.local_path import path_input
 from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, step_vehicle
+from topoloc.drive.topo_lp import path_frame
 from topoloc.errors import InputError
 
 
@@ -75,10 +76,12 @@ class DaggerSettings:
         return settings
 
 
-def controller_input(agent: str, route: DriveRoute, s: float, centre: NDArray[np.float64], yaw: float) -> Any:
-    """What controller ``agent`` is told at arc length ``s``: Topo-DLM the command index, Topo-LP the local-path plane."""
+def controller_input(agent: str, route: DriveRoute, s: float, centre: NDArray[np.float64], yaw: float,
+                     frame: str = "lane") -> Any:
+    """What controller ``agent`` is told at arc length ``s``: Topo-DLM the command index, Topo-LP the local-path plane
+    of the lane in ``frame`` (``drive.network.path_frame``), without error."""
     if agent == "lp":
-        return path_plane(lane_frame_path(local_path(route, s, centre, yaw)))
+        return path_input(local_path(route, s, centre, yaw), frame)
     return int(route.command_at(s))
 
 
@@ -118,7 +121,8 @@ def drive_on_policy(sim: Simulator, expert: Expert, controller: Any, agent: str,
         if expert_drives:
             control, expert_steps = label, expert_steps + 1
         else:
-            control = Control(*controller.act(image, obs.speed, controller_input(agent, sim.route, sim.s, centre, yaw)))
+            control = Control(*controller.act(image, obs.speed, controller_input(agent, sim.route, sim.s, centre, yaw,
+                                                                             path_frame(controller))))
         obs, status = sim.step(control)
     if status != SUCCESS:
         rows = rows[: max(0, len(rows) - DROP_BEFORE_FAILURE // every)]

@@ -7,6 +7,8 @@ channels) and a layer of 64 units; the speed through Topo-DLM's speed encoder. A
 (steer, target speed): the path says where to go, so there is no branch per command. Same losses as Topo-DLM.
 With ``image_dropout`` (``drive.train.image_dropout``) that share of the training samples reaches the joint layer
 with its image features zeroed, so the head must steer by the path and speed alone (the speed head still sees them).
+With ``path_frame: aligned`` (``drive.network.path_frame``, a deviation from the paper) the path is told in the
+vehicle's frame (:mod:`topoloc.drive.ground_alignment`), so the image need not tell where the vehicle stands on it.
 With ``path_prior`` (``drive.network.path_prior``, the ``waypoints`` output only; a deviation from the paper) the
 head gives a correction to the lane points: they are the local path's own points at the waypoint arcs plus the head's
 output, so a path that bends hard turns the wheel hard before the network has learnt anything, and the image says
@@ -32,13 +34,17 @@ from topoloc.drive.local_path import PATH_PX, PLANE_POINTS
 from topoloc.errors import InputError
 
 PATH_FEATURES = 64
+#: Frames of the local path (``drive.network.path_frame``): the localized vertex's (the paper's) or the vehicle's.
+PATH_FRAMES = ("lane", "aligned")
 
 
 class TopoLP(TopoDLM):
     """The local-path controller of the module docstring (Topo-DLM's encoders, a path encoder, one head)."""
 
-    def __init__(self, image_dropout: float = 0.0, path_prior: bool = False, **kwargs: Any) -> None:
+    def __init__(self, image_dropout: float = 0.0, path_prior: bool = False, path_frame: str = "lane", **kwargs: Any) -> None:
         super().__init__(**kwargs)
+        if path_frame not in PATH_FRAMES:
+            raise InputError("drive.network.path_frame", f"one of {', '.join(PATH_FRAMES)}, not {path_frame!r}")
         if not 0.0 <= float(image_dropout) < 1.0:
             raise InputError("drive.train.image_dropout", f"must be in [0, 1), got {image_dropout}")
         if path_prior and self.hparams.output != "waypoints":
@@ -110,3 +116,8 @@ class TopoLP(TopoDLM):
 
 #: The controllers ``train_controller`` trains and ``follow_route`` drives, by agent name.
 CONTROLLERS: dict[str, type[TopoDLM]] = {"dlm": TopoDLM, "lp": TopoLP}
+
+
+def path_frame(model: Any) -> str:
+    """The frame of the local path controller ``model`` was trained on (``lane`` for a Topo-DLM and older Topo-LPs)."""
+    return str(model.hparams.get("path_frame", "lane")) if hasattr(model, "hparams") else "lane"
