@@ -145,7 +145,8 @@ def test_a_waypoint_controller_is_logged_to_mlflow_with_its_signature(straight, 
 
 def test_topo_lp_learns_the_same_road_from_its_local_path(straight, straight_demos, tmp_path):
     drive, sim = straight
-    conf = drive | {"path_noise": {"shift_m": 2.0, "yaw_deg": 3.0}}
+    paper = {**drive["network"], "output": {"dlm": "steer", "lp": "steer"}, "path_prior": False, "path_frame": "lane"}
+    conf = drive | {"path_noise": {"shift_m": 2.0, "yaw_deg": 3.0, "lateral_m": 0.0}, "network": paper}
     model, _history, metrics = fit(conf, straight_demos, str(tmp_path / "lp.ckpt"), agent="lp")
     errors, zero = val_errors(model, conf, straight_demos, "lp"), zero_answer_errors(drive, straight_demos)
     assert learnt(errors, zero, "steer"), (errors, zero)
@@ -163,6 +164,7 @@ def test_topo_lp_image_dropout_hides_the_image_from_the_head_in_training_only(st
     """drive.train.image_dropout: the training samples it drops reach the head without their image features (the head
     must steer by the path); evaluation always sees the image; the setting survives the checkpoint."""
     drive, _ = straight
+    drive = drive | {"network": {**drive["network"], "output": {"dlm": "steer", "lp": "steer"}, "path_prior": False}}
     torch.manual_seed(0)
     model = build_model(drive | {"train": {**drive["train"], "image_dropout": 0.9}}, straight_demos, "lp")
     assert build_model(drive, straight_demos, "lp").hparams.image_dropout == 0.0
@@ -219,7 +221,8 @@ def test_a_path_prior_topo_lp_turns_by_its_path_before_it_has_learnt_anything(st
     with pytest.raises(ValueError, match="path_plane"):
         model.act(image, 3.0, raster(bend))  # the image alone: no points to start from
     with pytest.raises(InputError, match="drive.network.path_prior"):
-        build_model(drive | {"network": {**drive["network"], "path_prior": True}}, straight_demos, "lp")
+        build_model(drive | {"network": {**net, "output": {"dlm": "steer", "lp": "steer"}, "path_prior": True}},
+                    straight_demos, "lp")
 
 
 def test_a_path_prior_topo_lp_learns_the_lane_points_from_its_path(straight, straight_demos, tmp_path):
