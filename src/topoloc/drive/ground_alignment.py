@@ -37,6 +37,11 @@ HEADING_M_PER_DEG = 0.1
 #: Rows below the horizon skipped: they see the ground too far away to place it.
 HORIZON_MARGIN_PX = 3.0
 
+#: A teach image's ground points ``(K, 2)`` (m ahead, m left) and their gradients ``(2K,)`` (:meth:`GroundAligner.reference`).
+Reference = tuple[NDArray[np.float64], NDArray[np.float64]]
+#: A live image's horizontal and vertical gradients (:func:`gradients`).
+Gradients = tuple[NDArray[np.float32], NDArray[np.float32]]
+
 
 @dataclass(frozen=True)
 class Alignment:
@@ -62,7 +67,7 @@ class AlignmentSearch:
     refine_steps: int = 3
 
 
-def gradients(image: NDArray[np.uint8]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+def gradients(image: NDArray[np.uint8]) -> Gradients:
     """Horizontal and vertical central-difference gradients of the image's mean over its channels."""
     gray = image.astype(np.float32).mean(axis=2) if image.ndim == 3 else image.astype(np.float32)
     gx = np.zeros_like(gray)
@@ -84,7 +89,7 @@ class GroundAligner:
         self._x = ahead
         self._y = -(u - rig.cx) * ahead / rig.f
 
-    def reference(self, teach_image: NDArray[np.uint8]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def reference(self, teach_image: NDArray[np.uint8]) -> Reference:
         """The teach image's ground points ``(K, 2)`` (m ahead, m left) with the strongest gradients and their
         gradients ``(2K,)`` (what :meth:`align` compares; compute once per teach image)."""
         gx, gy = gradients(teach_image)
@@ -94,7 +99,7 @@ class GroundAligner:
         points = np.column_stack([self._x.ravel()[pick], self._y.ravel()[pick]])
         return points, np.concatenate([gx.ravel()[pick], gy.ravel()[pick]]).astype(np.float64)
 
-    def scores(self, reference: tuple[NDArray[np.float64], NDArray[np.float64]], live: tuple[NDArray[np.float32], NDArray[np.float32]],
+    def scores(self, reference: Reference, live: Gradients,
                poses: NDArray[np.float64]) -> NDArray[np.float64]:
         """The match score of each pose ``(H, 3)`` (m ahead, m left, rad) of the live camera (its gradients ``live``)."""
         points, ref = reference
@@ -123,7 +128,7 @@ class GroundAligner:
         ncc = ab / np.sqrt(np.maximum(aa * bb, 1e-9))
         return np.where(n >= 0.5 * len(ref), ncc, -1.0)  # half the points out of view: no answer
 
-    def _best(self, reference: tuple[NDArray[np.float64], NDArray[np.float64]], live: tuple[NDArray[np.float32], NDArray[np.float32]],
+    def _best(self, reference: Reference, live: Gradients,
               centre: NDArray[np.float64], half: NDArray[np.float64], steps: tuple[int, int, int]) -> tuple[NDArray[np.float64], float]:
         axes = [c + np.linspace(-h, h, n) if n > 1 else np.array([c]) for c, h, n in zip(centre, half, steps)]
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
@@ -131,7 +136,7 @@ class GroundAligner:
         k = int(np.argmax(score))
         return grid[k], float(score[k])
 
-    def align(self, reference: tuple[NDArray[np.float64], NDArray[np.float64]], live_image: NDArray[np.uint8],
+    def align(self, reference: Reference, live_image: NDArray[np.uint8],
               prior: tuple[float, float, float] | None = None) -> Alignment:
         """The live image's pose against a teach image's :meth:`reference`: a grid from no prior, or around ``prior``
         (m ahead, m left, rad), then a finer grid around the best."""
@@ -173,14 +178,14 @@ class PoseTracker:
         self.aligner, self.xy, self.teach_image, self.spec = aligner, np.asarray(xy, float), teach_image, spec
         self.min_score, self.relocalize_steps = float(min_score), int(relocalize_steps)
         self.behind_m, self.ahead_m = float(behind_m), float(ahead_m)
-        self._references: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+        self._references: dict[int, Reference] = {}
         self._frames = [chain_frame(self.xy, v) for v in range(len(self.xy))]
         self._arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(self.xy, axis=0).T))])
         self.state: VehicleState | None = None
         self.vertex = -1
         self.score, self._weak = float("nan"), 0
 
-    def reference(self, vertex: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def reference(self, vertex: int) -> Reference:
         """The teach image's ground points of ``vertex`` (computed once)."""
         if vertex not in self._references:
             self._references[vertex] = self.aligner.reference(self.teach_image(vertex))
