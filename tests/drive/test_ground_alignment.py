@@ -93,7 +93,7 @@ def test_the_tracker_searches_anew_after_its_matches_fail(turn, relocalize_steps
     at, yaw = chain_frame(topo.gt_xy, vertex)
     right = np.array([np.sin(yaw), -np.cos(yaw)])
     tracker = PoseTracker(GroundAligner(sim.rig), topo.xy, TeachImages(sim, topo, "clear_noon", 1, True), sim.spec,
-                          relocalize_steps=relocalize_steps)
+                          relocalize_steps=relocalize_steps, align_every=1)
     render = sim.renderer("overcast", 4)
     start = tracker.update(render.render(at, yaw, 0), 0.0, vertex, None)
     assert np.hypot(*(start.centre(sim.spec) - at)) < 0.3
