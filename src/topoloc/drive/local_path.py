@@ -118,8 +118,8 @@ def aligned_path(xy: NDArray[np.float64], vertex: int, centre: NDArray[np.float6
                  behind_m: float = 3.0, ahead_m: float = 10.0) -> NDArray[np.float64]:
     """The map chain's next metres from its point nearest the vehicle (``centre``, ``yaw`` in the chain's
     coordinates), in the vehicle's frame. The point is sought from ``behind_m`` before vertex ``vertex`` to
-    ``ahead_m`` after it: where the teach drive folded back on itself (a tight turn taken wide), the chain behind
-    the vertex can pass nearer the vehicle than the chain it is to follow."""
+    ``ahead_m`` after it: where the chain folds back on itself (the inside of a tight turn, offset from the road),
+    the chain behind the vertex can pass nearer the vehicle than the chain it is to follow."""
     points, arc = _chain(xy)
     at = _vertex_arc(xy, vertex)
     return _ahead_in_frame(points, arc, centre, yaw, at - behind_m, at + ahead_m)
