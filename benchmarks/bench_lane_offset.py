@@ -36,7 +36,7 @@ from topoloc.drive.controller import AGENT_NAMES, load_controller
 from topoloc.drive.demonstrations import as_input
 from topoloc.drive.episodes import speed_limit_ahead, teach_controls
 from topoloc.drive.expert import Expert, ExpertSettings
-from topoloc.drive.local_path import map_path
+from topoloc.drive.local_path import chain_frame, map_path
 from topoloc.drive.localization_adapters import GroundTruth
 from topoloc.drive.repeat_routes import repeat_routes
 from topoloc.drive.routes import make_simulator, teach_route
@@ -65,17 +65,14 @@ class PathOracle:
 
     def __init__(self, topo: TopometricMap, sim: Simulator, expert: Expert) -> None:
         self.topo, self.sim, self.expert = topo, sim, expert
-        self.arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(topo.gt_xy, axis=0).T))])
         self._paths: dict[int, np.ndarray] = {}
 
     def _placed(self, vertex: int) -> np.ndarray:
         """The vertex's local path (map metres) at the vertex's true pose."""
-        gt, at = self.topo.gt_xy, self.arc[vertex]
-        ahead = np.array([np.interp(at + 2.0, self.arc, gt[:, 0]), np.interp(at + 2.0, self.arc, gt[:, 1])])
-        yaw = float(np.arctan2(*(ahead - gt[vertex])[::-1]))  # the heading map_path's frame takes: the chord 2 m on
+        at, yaw = chain_frame(self.topo.gt_xy, vertex)  # the frame map_path takes, on the teach drive's true path
         local = map_path(self.topo.xy, vertex)
         c, s = np.cos(yaw), np.sin(yaw)
-        return gt[vertex] + np.column_stack([local[:, 0] * c - local[:, 1] * s, local[:, 0] * s + local[:, 1] * c])
+        return at + np.column_stack([local[:, 0] * c - local[:, 1] * s, local[:, 0] * s + local[:, 1] * c])
 
     def act(self, image: np.ndarray, speed: float, vertex: int) -> Control:
         if vertex not in self._paths:

@@ -34,9 +34,9 @@ POINTS = 300
 #: How a vertex's heading counts against its distance when the tracker picks the vertex nearest its pose (m per deg):
 #: where the teach drive turned slowly, many vertices lie within a metre, told apart by their heading.
 HEADING_M_PER_DEG = 0.1
-#: How far ahead and behind the best pose :attr:`Alignment.forward_peak` scores the match again (m).
+#: How far ahead and behind the best pose :meth:`GroundAligner.forward_peak` scores the match again (m).
 FORWARD_PROBE_M = 0.5
-#: The least :attr:`Alignment.forward_peak` for a tracked match to move the pose along the road; by default none does,
+#: The least :meth:`GroundAligner.forward_peak` for a tracked match to move the pose along the road; by default none does,
 #: and the position along the road is the vehicle model's (a search without a prior still sets it). On a straight road
 #: with unbroken lines a teach view a little further on matches as well: with every match moving it the pose drifted
 #: up to 7 m along the default teach route (across the road it stayed within 0.1 m); with 0.02-0.05, 0.5-1.7 m on
@@ -55,14 +55,12 @@ Gradients = tuple[NDArray[np.float32], NDArray[np.float32]]
 @dataclass(frozen=True)
 class Alignment:
     """The live camera's pose in the teach camera's frame (m ahead, m to the left, rad counter-clockwise) and the
-    match's score (normalised cross-correlation of gradients, -1 .. 1), and how much better it is than the same pose
-    :data:`FORWARD_PROBE_M` ahead or behind (``forward_peak``: near 0 where the road looks alike along it)."""
+    match's score (normalised cross-correlation of gradients, -1 .. 1)."""
 
     forward_m: float
     left_m: float
     yaw: float
     score: float
-    forward_peak: float = float("inf")
 
 
 @dataclass(frozen=True)
@@ -172,9 +170,14 @@ class GroundAligner:
         best, _ = self._best(reference, live, centre, half, steps)
         spacing = 2.0 * half / np.maximum(np.array(steps) - 1, 1)
         best, score = self._best(reference, live, best, spacing, (search.refine_steps,) * 3)
-        aside = best + np.array([[-FORWARD_PROBE_M, 0.0, 0.0], [FORWARD_PROBE_M, 0.0, 0.0]])
-        peak = score - float(self.scores(reference, live, aside).max())
-        return Alignment(float(best[0]), float(best[1]), float(best[2]), score, peak)
+        return Alignment(float(best[0]), float(best[1]), float(best[2]), score)
+
+    def forward_peak(self, reference: Reference, live_image: NDArray[np.uint8], found: Alignment) -> float:
+        """How much better ``found`` matches than the same pose :data:`FORWARD_PROBE_M` ahead or behind (near 0 where
+        the road looks alike along it)."""
+        best = np.array([found.forward_m, found.left_m, found.yaw])
+        probes = best + np.array([[-FORWARD_PROBE_M, 0.0, 0.0], [FORWARD_PROBE_M, 0.0, 0.0]])
+        return found.score - float(self.scores(reference, gradients(live_image), probes).max())
 
 
 class PoseTracker:
@@ -204,7 +207,7 @@ class PoseTracker:
         self.min_forward_peak = float(min_forward_peak)
         self._since = 0
         self._references: dict[int, Reference] = {}
-        self._frames = [chain_frame(self.xy, v) for v in range(len(self.xy))]
+        self._frames: dict[int, tuple[NDArray[np.float64], float]] = {}
         self._arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(self.xy, axis=0).T))])
         self.state: VehicleState | None = None
         self.vertex = -1
@@ -216,13 +219,19 @@ class PoseTracker:
             self._references[vertex] = self.aligner.reference(self.teach_image(vertex))
         return self._references[vertex]
 
+    def frame(self, vertex: int) -> tuple[NDArray[np.float64], float]:
+        """Vertex ``vertex``'s frame on the chain (:func:`topoloc.drive.local_path.chain_frame`, computed once)."""
+        if vertex not in self._frames:
+            self._frames[vertex] = chain_frame(self.xy, vertex)
+        return self._frames[vertex]
+
     def _nearest_vertex(self, state: VehicleState) -> int:
         """The vertex whose teach pose is nearest ``state``'s camera, around the last vertex."""
         near = np.flatnonzero((self._arc >= self._arc[self.vertex] - self.behind_m)
                               & (self._arc <= self._arc[self.vertex] + self.ahead_m))
         centre = state.centre(self.spec)
-        cost = [float(np.hypot(*(centre - self._frames[v][0]))) + HEADING_M_PER_DEG
-                * abs(np.degrees((state.yaw - self._frames[v][1] + np.pi) % (2 * np.pi) - np.pi)) for v in near]
+        cost = [float(np.hypot(*(centre - self.frame(v)[0]))) + HEADING_M_PER_DEG
+                * abs(np.degrees((state.yaw - self.frame(v)[1] + np.pi) % (2 * np.pi) - np.pi)) for v in near]
         return int(near[int(np.argmin(cost))])
 
     def update(self, image: NDArray[np.uint8], speed: float, vertex: int, control: Control | None) -> VehicleState:
@@ -240,7 +249,7 @@ class PoseTracker:
                 return self.state
         else:
             self.vertex, self._weak = int(vertex), 0
-        origin, yaw = self._frames[self.vertex]
+        origin, yaw = self.frame(self.vertex)
         c, s = np.cos(yaw), np.sin(yaw)
         prior = None
         if tracking:
@@ -252,7 +261,8 @@ class PoseTracker:
         if found.score >= self.min_score or self.state is None:
             trusted = found.score >= self.min_score
             forward, left, turn = (found.forward_m, found.left_m, found.yaw) if trusted else (0.0, 0.0, 0.0)
-            if prior is not None and found.forward_peak < self.min_forward_peak:
+            if prior is not None and (np.isinf(self.min_forward_peak) or self.aligner.forward_peak(
+                    self.reference(self.vertex), image, found) < self.min_forward_peak):
                 forward = prior[0]  # a road that looks alike a little further on: the model's along-track estimate
             heading = yaw + turn
             centre = origin + np.array([c * forward - s * left, s * forward + c * left])
