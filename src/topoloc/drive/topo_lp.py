@@ -32,6 +32,7 @@ from torch import nn
 from topoloc.drive.controller import WAYPOINT_ARCS, WAYPOINT_SCALE_M, TopoDLM
 from topoloc.drive.local_path import PATH_PX, PLANE_POINTS
 from topoloc.errors import InputError
+from topoloc.place.network import eval_mode
 
 PATH_FEATURES = 64
 #: Frames of the local path (``drive.network.path_frame``): the localized vertex's (the paper's) or the vehicle's.
@@ -100,7 +101,7 @@ class TopoLP(TopoDLM):
     def act(self, image: NDArray[np.uint8], speed: float, path: NDArray[np.uint8]) -> tuple[float, float]:  # type: ignore[override]
         """Steer and throttle for one camera image (H, W, C) uint8, the speed (m/s) and a local-path plane
         (:func:`topoloc.drive.local_path.path_plane`)."""
-        self.eval()
+        eval_mode(self)
         x = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
         v = torch.tensor([float(speed)])
         out, _ = self._lp_heads(self._shrink(x), v, torch.from_numpy(path)[None])

@@ -53,6 +53,13 @@ class BasicBlock(nn.Module):
         return F.relu(out + self.shortcut(x), inplace=True)
 
 
+def eval_mode(module: nn.Module) -> None:
+    """Put ``module`` in eval mode unless it is already (``eval()`` walks every submodule each call: about a
+    millisecond a closed-loop step over the controller and the retrieval network)."""
+    if module.training:
+        module.eval()
+
+
 def standardize(images: torch.Tensor, eps: float = 1.0) -> torch.Tensor:
     """Per image: subtract each channel's mean, divide by the standard deviation over all pixels (0..255 input)."""
     centred = images - images.mean(dim=(2, 3), keepdim=True)
@@ -176,7 +183,7 @@ class SiameseNet(L.LightningModule):
     @torch.no_grad()
     def embed(self, images: NDArray[np.uint8], batch_size: int = 256) -> NDArray[np.float32]:
         """Embeddings ``(n, D)`` of uint8 images ``(n, H, W, C)``."""
-        self.eval()
+        eval_mode(self)
         out = []
         for start in range(0, len(images), batch_size):
             batch = torch.from_numpy(np.ascontiguousarray(images[start:start + batch_size])).permute(0, 3, 1, 2)
@@ -186,7 +193,7 @@ class SiameseNet(L.LightningModule):
     @torch.no_grad()
     def same_place(self, query: NDArray[np.float32], refs: NDArray[np.float32]) -> NDArray[np.float32]:
         """Probability that the place of embedding ``query`` (D,) is that of each row of ``refs`` (m, D)."""
-        self.eval()
+        eval_mode(self)
         q = torch.from_numpy(np.asarray(query, np.float32)).to(self.device).expand(len(refs), -1)
         r = torch.from_numpy(np.asarray(refs, np.float32)).to(self.device)
         return torch.softmax(self.head(torch.cat([q, r], dim=1)), dim=1)[:, 1].cpu().numpy()
@@ -198,7 +205,7 @@ class SiameseNet(L.LightningModule):
         The first layer of the head acts on the concatenation, so it splits into a query part and a
         reference part computed once each; only the ReLU and the last layer run per pair.
         """
-        self.eval()
+        eval_mode(self)
         first, last, dim = self.head[0], self.head[2], self.hparams.embedding_dim
         q = torch.from_numpy(np.asarray(queries, np.float32)).to(self.device) @ first.weight[:, :dim].T
         r = torch.from_numpy(np.asarray(refs, np.float32)).to(self.device) @ first.weight[:, dim:].T + first.bias
