@@ -3,12 +3,13 @@
 Usage (after ``snakemake all`` built ``results/<region>/drive/follow``)::
 
     python -m benchmarks.bench_drive [--configfile config/config.yaml] [--steps 300] [--localizer place_loop]
-        [--controller CKPT]
+        [--agents dlm,lp]
 
-1. **Speed**: on the evaluation route, one torch thread, the closed loop of Topo-DLM with the configured
-   place localizer (render the camera image, embed it and localize on the topometric map, run the controller,
-   step the vehicle), then its parts alone: rendering, rendering plus the controller, rendering plus the
-   localization. Target: at least 20 closed-loop steps per second at the controller's image size.
+1. **Speed**: on the evaluation route, one torch thread, the closed loop of each agent (Topo-DLM, Topo-LP) with the
+   configured place localizer (render the camera image, embed it and localize on the topometric map, run the
+   controller, and for a Topo-LP trained with ``path_frame: aligned`` its pose tracker on the teach drive's images,
+   step the vehicle), then its parts alone: rendering, rendering plus the controller (and tracker), rendering plus the
+   localization. Target (issue 39): at least 100 closed-loop steps per second at the controller's image size.
 2. **Success rates**: the ``follow_route`` summary per agent and condition, checked against the issue's
    targets (Topo-DLM and Topo-LP with retrieval localization: mean success >= 0.8 and every condition >= 0.6,
    ahead of replay).
@@ -27,24 +28,26 @@ import torch
 
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import load
-from topoloc.drive.agents import DLMAgent
+from topoloc.drive.agents import DLMAgent, LPAgent, TeachImages
 from topoloc.drive.camera import image_shape, place_window
-from topoloc.drive.controller import load_controller
+from topoloc.drive.controller import AGENT_NAMES, load_controller
 from topoloc.drive.demonstrations import as_input
 from topoloc.drive.localization_adapters import GroundTruth, PlaceLocalization
 from topoloc.drive.repeat_routes import vertex_lane_s
 from topoloc.drive.routes import evaluation_route, make_simulator
 from topoloc.drive.simulator import RUNNING, Control
+from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.place.network import load_model
 from topoloc.place.topometric_map import TopometricMap
 from topoloc.registry import make
 
-TARGET_STEPS_PER_S = 20.0
+TARGET_STEPS_PER_S = 100.0
 
 
-def speed(conf: dict, root: Path, steps: int, localizer: str, controller: Path) -> dict[str, float]:
-    """Steps per second of the closed loop of the Topo-DLM ``controller`` and of its parts (one thread)."""
+def speed(conf: dict, root: Path, steps: int, localizer: str, agents: list[str]) -> dict[str, float]:
+    """Steps per second of the closed loop of each of ``agents`` (the region's controllers) and of its parts (one
+    thread)."""
     torch.set_num_threads(1)
     graph = RoadGraph.load(root / "graph" / "graph.graphml")
     route = evaluation_route(graph, conf)
@@ -53,31 +56,36 @@ def speed(conf: dict, root: Path, steps: int, localizer: str, controller: Path) 
     topo = TopometricMap.load(root / "topometric_map" / "map.npz")
     lane_s = vertex_lane_s(route, topo)
     place = conf["place"]
-    agent = DLMAgent(load_controller(controller, image_shape(conf)), topo)
+    color = bool(place["image"]["color"])
+    teach = TeachImages(sim, topo, place["teach_condition"], int(conf["drive"]["seed"]), color)
     retrieval = load_model(root / "retrieval" / "model.ckpt")
     condition = place["repeat_conditions"][0]
+    runs: list[tuple[str, str | None, str | None]] = [("render only", None, None), ("render + localization", None, "place")]
+    for agent in agents:
+        name = AGENT_NAMES[agent]
+        runs += [(f"{name}: render + controller", agent, "ground_truth"), (f"{name}: closed loop", agent, "place")]
     out = {}
-    for name, use_agent, loc in (("render only", False, None), ("render + controller", True, GroundTruth(lane_s)),
-                                 ("render + localization", False, "place"), ("closed loop", True, "place")):
-        localization = PlaceLocalization(make(localizer), topo, retrieval, place["localize"],
-                                         place_window(conf)) if loc == "place" else loc
-        obs = sim.reset(condition, 1)
-        if localization is not None:
-            localization.start(np.random.default_rng(0))
-        done, status = 0, RUNNING
+    for name, agent, loc in runs:
+        model = load_controller(root / "drive" / agent / "controller.ckpt", image_shape(conf), "drive.camera",
+                                CONTROLLERS[agent]) if agent else None
+        localization = (PlaceLocalization(make(localizer), topo, retrieval, place["localize"], place_window(conf))
+                        if loc == "place" else GroundTruth(lane_s) if loc else None)
+        done, status, driver = 0, RUNNING, None
         started = time.perf_counter()
         while done < steps:
-            vertex = 0
-            if localization is not None:
-                vertex, _ = localization.update(as_input(obs.image, place["image"]["color"]), obs.speed * sim.spec.dt, sim)
-            control = agent.act(as_input(obs.image, place["image"]["color"]), obs.speed, vertex) if use_agent \
-                else Control(0.0, 0.3)
-            obs, status = sim.step(control)
-            done += 1
-            if status != RUNNING:
+            if done == 0 or status != RUNNING:
                 obs = sim.reset(condition, 1)
                 if localization is not None:
                     localization.start(np.random.default_rng(0))
+                driver = (None if model is None else LPAgent(model, topo, teach) if agent == "lp"
+                          else DLMAgent(model, topo))
+            vertex = 0
+            image = as_input(obs.image, color)
+            if localization is not None:
+                vertex, _ = localization.update(image, obs.speed * sim.spec.dt, sim)
+            control = driver.act(image, obs.speed, vertex) if driver is not None else Control(0.0, 0.3)
+            obs, status = sim.step(control)
+            done += 1
         out[name] = done / (time.perf_counter() - started)
     return out
 
@@ -87,21 +95,24 @@ def main() -> None:
     parser.add_argument("--configfile", default="config/config.yaml")
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--localizer", default="place_loop")
-    parser.add_argument("--controller", type=Path, help="a Topo-DLM checkpoint (default: the region's own)")
+    parser.add_argument("--agents", default="dlm,lp", help="controllers of the region to time, comma-separated")
     add_out_option(parser, "bench_drive")
     args = parser.parse_args()
     with markdown_copy(args.out):
         config = load(Path(args.configfile))
         conf = {"drive": config["drive"], "place": config["place"], "render": config["render"]}
         root = Path("results") / config["region"]["name"]
-        rates = speed(conf, root, args.steps, args.localizer, args.controller or root / "drive" / "dlm" / "controller.ckpt")
+        agents = [a for a in args.agents.split(",") if a]
+        rates = speed(conf, root, args.steps, args.localizer, agents)
         height, width, _ = image_shape(conf)
         size = f"{width}x{height}"
         print(f"## Closed-loop steps per second (one thread, {size} images, {args.steps} steps each)")
         for name, value in rates.items():
             print(f"- {name}: {value:.1f} steps/s")
-        verdict = "met" if rates["closed loop"] >= TARGET_STEPS_PER_S else "MISSED"
-        print(f"target >= {TARGET_STEPS_PER_S:.0f} closed-loop steps/s: {verdict}")
+        for agent in agents:
+            rate = rates[f"{AGENT_NAMES[agent]}: closed loop"]
+            verdict = "met" if rate >= TARGET_STEPS_PER_S else "MISSED"
+            print(f"{AGENT_NAMES[agent]}: target >= {TARGET_STEPS_PER_S:.0f} closed-loop steps/s: {verdict}")
         summary_path = root / "drive" / "follow" / "summary.csv"
         result = {"steps_per_s": rates}
         if summary_path.is_file():

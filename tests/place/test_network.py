@@ -46,6 +46,16 @@ def test_forward_embed_and_score_agree():
     assert aug.shape == (4, 3, 48, 64) and aug.min() >= 0 and aug.max() <= 255
 
 
+def test_a_model_left_in_training_mode_embeds_as_in_eval_mode():
+    torch.manual_seed(0)
+    model = SiameseNet(channels=[8, 16], embedding_dim=16, hidden=32).eval()
+    images = textures(4, 1)
+    expected = model.embed(images)
+    model.train()  # what a fit leaves behind: batch norm on batch statistics until eval mode is restored
+    assert np.allclose(model.embed(images), expected, atol=1e-6)
+    assert not model.training and not any(m.training for m in model.modules())
+
+
 def test_box_mean_is_the_replicate_padded_average_pool():
     x = torch.rand(2, 3, 20, 30) * 255
     for size in (3, 9):
