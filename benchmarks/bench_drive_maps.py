@@ -8,7 +8,7 @@ them)::
         --map kitti00=results/kitti00 --case helsinki+heidelberg:kitti00 --case helsinki:kitti00 \\
         [--configfile config/config.yaml --configfile config/experiments/drive_paper.yaml ...] \\
         [--set drive.check.routes=100 ...] [--agent lp] [--seeds 0,1,2] [--workers N] [--train-workers N]
-        [--train-only] [--work DIR] [--out FILE]
+        [--train-only] [--teach-repeat ground_truth,place_loop --retrieval CKPT] [--work DIR] [--out FILE]
 
 A case ``TRAIN+TRAIN:TEST`` trains one controller per seed on the named maps' demonstrations pooled
 (:meth:`topoloc.drive.demonstrations.Demonstrations.pool`, what ``drive.demonstrations_from`` does in the
@@ -18,6 +18,13 @@ order (later ones win), then ``--set``. Demonstration routes and check routes ar
 they run on ``--workers`` processes; trainings run one after the other, or ``--train-workers`` at once (processes
 sharing the GPU), on the configured accelerator (``drive.train.accelerator``: a GPU where there is one). A map's
 demonstrations and each trained controller are kept in ``--work`` and reused by a later run with the same settings.
+
+With ``--teach-repeat``, each check route is taught and repeated as ``follow_route`` does on the teach route: the
+expert's teach drive under ``place.teach_condition`` gives the route's topometric map in memory
+(:func:`topoloc.drive.taught_routes.teach_map`, embedded by the ``--retrieval`` network), and the controller drives
+it with each localization named (``ground_truth`` or a place localizer of the registry), an aligned Topo-LP with its
+pose tracker on the teach drive's images, under the teach drive's speed ahead; the rows then carry a
+``localization`` column, and routes whose teach drive the expert did not finish are left out (``untaught``).
 
 Prints per case and seed the check's success rate, the share of each route driven, the success per condition and
 the junctions reached that were taken as commanded (:mod:`topoloc.drive.junctions`: all, and the turns alone), then
@@ -44,17 +51,37 @@ import torch
 
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import deep_merge, dotted_overrides, load
+from topoloc.drive.agents import DLMAgent, LPAgent, TeachImages
+from topoloc.drive.camera import place_window
 from topoloc.drive.controller import load_controller
 from topoloc.drive.controller_training import fit
-from topoloc.drive.demonstrations import Demonstrations, collect_demonstrations, demonstrate_route
-from topoloc.drive.junctions import NOT_REACHED, TAKEN, junction_results, roundabout_ways, route_junctions
-from topoloc.drive.on_policy import check_metrics, check_route
+from topoloc.drive.demonstrations import (
+    Demonstrations,
+    collect_demonstrations,
+    demonstrate_route,
+    training_route,
+)
+from topoloc.drive.episodes import run_episode, speed_limit_ahead
+from topoloc.drive.expert import Expert, ExpertSettings
+from topoloc.drive.junctions import (
+    NOT_REACHED,
+    TAKEN,
+    junction_results,
+    roundabout_ways,
+    route_junctions,
+)
+from topoloc.drive.localization_adapters import GroundTruth, PlaceLocalization
+from topoloc.drive.on_policy import CHECK_STREAM, check_metrics, check_route
 from topoloc.drive.routes import make_simulator, teach_route
-from topoloc.drive.simulator import OUTCOMES
+from topoloc.drive.simulator import OUTCOMES, SUCCESS
+from topoloc.drive.taught_routes import teach_map
 from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.drive.turn_routes import TrainingRoutes
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
+from topoloc.localizer import PLACE_OBSERVATIONS
+from topoloc.place.network import load_model
+from topoloc.registry import check_names, make
 
 REPO = Path(__file__).resolve().parent.parent
 log = logging.getLogger("bench_drive_maps")
@@ -63,9 +90,9 @@ log = logging.getLogger("bench_drive_maps")
 _STATE: dict[str, Any] = {}
 
 
-def _init_worker(conf: dict[str, Any], maps: dict[str, str]) -> None:
+def _init_worker(conf: dict[str, Any], maps: dict[str, str], retrieval: str | None = None) -> None:
     torch.set_num_threads(1)
-    _STATE.update(conf=conf, maps=maps, loaded={}, graphs={}, roundabouts={}, models={})
+    _STATE.update(conf=conf, maps=maps, loaded={}, graphs={}, roundabouts={}, models={}, retrieval=retrieval)
 
 
 def _map(name: str) -> tuple[Any, Any, Any]:
@@ -88,26 +115,71 @@ def _demonstrate(task: tuple[str, int]) -> tuple[str, int, Any]:
     return name, r, demonstrate_route(r, _STATE["conf"], avoid, make_route, make_sim)
 
 
+def _controller(model_path: str) -> Any:
+    """The controller at ``model_path`` (this process's copy, loaded once)."""
+    if model_path not in _STATE["models"]:
+        _STATE["models"][model_path] = load_controller(model_path, cls=CONTROLLERS[str(_STATE["conf"]["controller"])]).eval()
+    return _STATE["models"][model_path]
+
+
+def _junctions(test: str, sim: Any) -> list[Any]:
+    """The junctions of ``sim``'s route on map ``test`` (its roundabouts read from the OSM file once per process)."""
+    graph, osm = _STATE["graphs"][test]
+    if test not in _STATE["roundabouts"]:
+        _STATE["roundabouts"][test] = roundabout_ways(osm)
+    jconf = _STATE["conf"]["drive"]["follow"]["junctions"]
+    return route_junctions(graph, sim.route, _STATE["roundabouts"][test], float(jconf["cluster_m"]), float(jconf["around_m"]))
+
+
 def _check(task: tuple[str, str, int, str]) -> tuple[str, int, tuple[str, str, float], list[dict[str, Any]]]:
     key, model_path, r, test = task
     conf = _STATE["conf"]
-    agent = str(conf["controller"])
-    if model_path not in _STATE["models"]:
-        _STATE["models"][model_path] = load_controller(model_path, cls=CONTROLLERS[agent]).eval()
     avoid, make_route, make_sim = _map(test)
     made = []  # the route's simulator, for where the drive ended
-    row = check_route(r, _STATE["models"][model_path], agent, conf, avoid, make_route,
+    row = check_route(r, _controller(model_path), str(conf["controller"]), conf, avoid, make_route,
                       lambda route: made.append(make_sim(route)) or made[-1])
-    graph, osm = _STATE["graphs"][test]
-    if test not in _STATE["roundabouts"]:  # read from the OSM file of a map that is checked, once per process
-        _STATE["roundabouts"][test] = roundabout_ways(osm)
-    roundabouts = _STATE["roundabouts"][test]
-    jconf = conf["drive"]["follow"]["junctions"]
     sim = made[-1]
-    junctions = route_junctions(graph, sim.route, roundabouts, float(jconf["cluster_m"]), float(jconf["around_m"]))
-    rows = junction_results(junctions, np.array([sim.s]), np.array([np.nan]), row[1], float(jconf["before_m"]),
-                            float(jconf["after_m"]))
+    jconf = conf["drive"]["follow"]["junctions"]
+    rows = junction_results(_junctions(test, sim), np.array([sim.s]), np.array([np.nan]), row[1],
+                            float(jconf["before_m"]), float(jconf["after_m"]))
     return key, r, row, rows
+
+
+def _teach_repeat(task: tuple[str, str, int, str, list[str]]) -> tuple[str, int, dict[str, Any] | None]:
+    """Check route ``r`` of map ``test`` taught and repeated (see the module docstring): per localization the check's
+    row (condition, outcome, share driven), the junction rows and the mean localization error; None when the expert
+    did not finish the teach drive."""
+    key, model_path, r, test, localizations = task
+    conf = _STATE["conf"]
+    drive, place = conf["drive"], conf["place"]
+    if "retrieval_model" not in _STATE:
+        _STATE["retrieval_model"] = load_model(_STATE["retrieval"])
+    retrieval, controller, agent = _STATE["retrieval_model"], _controller(model_path), str(conf["controller"])
+    avoid, make_route, make_sim = _map(test)
+    route = training_route(r, conf, avoid, make_route, stream=CHECK_STREAM)  # the check's route r
+    sim = make_sim(route)
+    conditions = [str(c) for c in place["repeat_conditions"]]
+    condition = conditions[r % len(conditions)]
+    seed = int(np.random.SeedSequence([int(drive["seed"]), CHECK_STREAM, r]).generate_state(1)[0])
+    taught = teach_map(sim, Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"])), retrieval, conf, seed)
+    if taught.outcome != SUCCESS:
+        return key, r, None
+    ahead = drive["follow"]["teach_speed_ahead_m"]
+    limit = None if ahead is None else speed_limit_ahead(taught.teach_speed, taught.lane_s, float(ahead))
+    teach = TeachImages(sim, taught.topo, str(place["teach_condition"]), seed, bool(place["image"]["color"]))
+    junctions, jconf = _junctions(test, sim), drive["follow"]["junctions"]
+    out = {}
+    for name in localizations:
+        driver = LPAgent(controller, taught.topo, teach) if agent == "lp" else DLMAgent(controller, taught.topo)
+        localization = (GroundTruth(taught.lane_s) if name == "ground_truth" else
+                        PlaceLocalization(make(name, PLACE_OBSERVATIONS), taught.topo, retrieval, place["localize"],
+                                          place_window(conf)))
+        episode = run_episode(sim, driver, localization, taught.topo, condition, seed, conf, 0, limit)
+        share = min(1.0, episode.progress_m / max(route.length_m - sim.spec.goal_m, 1e-9))
+        rows = junction_results(junctions, episode.s, episode.speed, episode.outcome, float(jconf["before_m"]),
+                                float(jconf["after_m"]))
+        out[name] = ((condition, episode.outcome, share), rows, float(np.mean(episode.loc_error_m)))
+    return key, r, out
 
 
 def digest(value: Any) -> str:
@@ -184,12 +256,13 @@ def junction_columns(rows: pd.DataFrame) -> dict[str, float]:
 
 
 def summary(rows: pd.DataFrame) -> pd.DataFrame:
-    """Each case's mean and sample standard deviation over its seeds."""
+    """Each case's (and localization's, where the rows have one) mean and sample standard deviation over its seeds."""
+    keys = [c for c in ("case", "localization") if c in rows.columns]
     out = []
-    for case, group in rows.groupby("case", sort=False):
-        row: dict[str, Any] = {"case": case, "seed": f"{len(group)} seeds"}
+    for names, group in rows.groupby(keys, sort=False):
+        row: dict[str, Any] = {**dict(zip(keys, names)), "seed": f"{len(group)} seeds"}
         for column in rows.columns:
-            if column in ("case", "seed") or not np.issubdtype(group[column].dtype, np.number):
+            if column in (*keys, "seed") or not np.issubdtype(group[column].dtype, np.number):
                 continue
             values = group[column].dropna().to_numpy(float)
             spread = values.std(ddof=1) if len(values) > 1 else 0.0
@@ -209,6 +282,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--train-workers", type=int, default=1, help="trainings at once (processes sharing the GPU)")
     parser.add_argument("--train-only", action="store_true", help="record and train, do not check")
+    parser.add_argument("--teach-repeat", default="", metavar="LOCALIZATION,...",
+                        help="teach each check route and repeat it with these localizations (ground_truth, place_loop, ...)")
+    parser.add_argument("--retrieval", default=None, help="the place network of --teach-repeat's maps (a retrieval model.ckpt)")
     parser.add_argument("--work", default="results/bench_drive_maps", help="demonstrations and controllers, kept")
     add_out_option(parser, "bench_drive_maps")
     args = parser.parse_args(argv)
@@ -222,6 +298,11 @@ def main(argv: list[str] | None = None) -> int:
         missing = [n for n in (*train_maps, test) if n not in maps]
         if missing:
             parser.error(f"--case {case}: no --map for {', '.join(missing)}")
+    localizations = [n for n in args.teach_repeat.split(",") if n]
+    if localizations:
+        check_names([n for n in localizations if n != "ground_truth"], "--teach-repeat", PLACE_OBSERVATIONS)
+        if not args.retrieval or not Path(args.retrieval).is_file():
+            parser.error(f"--teach-repeat needs --retrieval, a retrieval model.ckpt (got {args.retrieval})")
     seeds = [int(s) for s in args.seeds.split(",")]
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
@@ -229,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
     models = {(case, seed): controller_path(case, train_maps, seed, conf, work) for case, train_maps, _ in cases
               for seed in seeds}
     spawn = multiprocessing.get_context("spawn")  # not forked: the trainings may have started CUDA in this process
-    with ProcessPoolExecutor(args.workers, mp_context=spawn, initializer=_init_worker, initargs=(conf, maps)) as pool:
+    with ProcessPoolExecutor(args.workers, mp_context=spawn, initializer=_init_worker, initargs=(conf, maps, args.retrieval)) as pool:
         todo = [(case, train_maps, seed) for case, train_maps, _ in cases for seed in seeds
                 if not (models[(case, seed)].exists() and models[(case, seed)].with_suffix(".json").exists())]
         if todo:
@@ -248,33 +329,54 @@ def main(argv: list[str] | None = None) -> int:
         if args.train_only:
             return 0
         routes = int(conf["drive"]["check"]["routes"])
-        tasks = [(f"{case}|{seed}", str(models[(case, seed)]), r, test)
-                 for case, _, test in cases for seed in seeds for r in range(routes)]
         started = time.perf_counter()
         checked: dict[str, list[tuple[int, Any]]] = {}
         junctions: dict[str, list[dict[str, Any]]] = {}
-        for key, r, row, rows in pool.map(_check, tasks):
-            checked.setdefault(key, []).append((r, row))
-            junctions.setdefault(key, []).extend(rows)
+        loc_error: dict[str, list[float]] = {}
+        untaught: dict[str, int] = {}
+        if localizations:
+            tasks = [(f"{case}|{seed}", str(models[(case, seed)]), r, test, localizations)
+                     for case, _, test in cases for seed in seeds for r in range(routes)]
+            for key, r, result in pool.map(_teach_repeat, tasks):
+                if result is None:
+                    untaught[key] = untaught.get(key, 0) + 1
+                for name, (row, rows, error) in (result or {}).items():
+                    checked.setdefault(f"{key}|{name}", []).append((r, row))
+                    junctions.setdefault(f"{key}|{name}", []).extend(rows)
+                    loc_error.setdefault(f"{key}|{name}", []).append(error)
+        else:
+            tasks = [(f"{case}|{seed}", str(models[(case, seed)]), r, test)
+                     for case, _, test in cases for seed in seeds for r in range(routes)]
+            for key, r, row, rows in pool.map(_check, tasks):
+                checked.setdefault(key, []).append((r, row))
+                junctions.setdefault(key, []).extend(rows)
         log.info("checks: %d routes in %.0f s", len(tasks), time.perf_counter() - started)
 
     rows = []
     for case, _, test in cases:
         for seed in seeds:
-            metrics = check_metrics([row for _, row in sorted(checked[f"{case}|{seed}"])])
-            rows.append({"case": case, "seed": seed,
-                         "val steer MAE": trained[(case, seed)].get("best/val/steer_mae", float("nan")),
-                         **{k.removeprefix("check/"): v for k, v in metrics.items() if k != "check/routes"},
-                         **junction_columns(pd.DataFrame(junctions[f"{case}|{seed}"]))})
+            for name in localizations or [None]:
+                key = f"{case}|{seed}" + (f"|{name}" if name else "")
+                if key not in checked:  # every route's teach drive failed
+                    continue
+                metrics = check_metrics([row for _, row in sorted(checked[key])])
+                extra = {"localization": name, "untaught": float(untaught.get(f"{case}|{seed}", 0)),
+                         "mean loc error m": float(np.mean(loc_error[key]))} if name else {}
+                rows.append({"case": case, "seed": seed, **extra,
+                             "val steer MAE": trained[(case, seed)].get("best/val/steer_mae", float("nan")),
+                             **{k.removeprefix("check/"): v for k, v in metrics.items() if k != "check/routes"},
+                             **junction_columns(pd.DataFrame(junctions[key]))})
     table = pd.DataFrame(rows)
     counts = [c for c in table.columns if c.startswith("success_") or c in OUTCOMES]
     table[counts] = table[counts].fillna(0.0)  # a condition or failure a seed did not meet: none of it
-    text = (f"{args.agent}, {routes} check routes per case and seed\n\n"
+    how = f", taught and repeated with {', '.join(localizations)}" if localizations else ""
+    text = (f"{args.agent}, {routes} check routes per case and seed{how}\n\n"
             + table.to_markdown(index=False, floatfmt=".2f")
             + "\n\n" + summary(table).to_markdown(index=False))
     with markdown_copy(args.out):
         print(text)
-    junction_rows = pd.DataFrame([{"case": key.split("|")[0], "seed": int(key.split("|")[1]), **row}
+    junction_rows = pd.DataFrame([{"case": key.split("|")[0], "seed": int(key.split("|")[1]),
+                                   **({"localization": key.split("|")[2]} if localizations else {}), **row}
                                   for key, rows in junctions.items() for row in rows])
     with atomic_path(Path(args.out).with_suffix(".junctions.csv")) as tmp:
         junction_rows.to_csv(tmp, index=False)

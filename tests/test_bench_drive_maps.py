@@ -5,12 +5,15 @@ from __future__ import annotations
 import math
 import shutil
 
+import lightning as L
 import pandas as pd
 import pytest
+import torch
 
 from benchmarks.bench_drive_maps import junction_columns, main, summary
 from tests.render.conftest import town  # noqa: F401 (the fixture)
 from topoloc.drive.junctions import FAILED, NOT_REACHED, TAKEN
+from topoloc.place.network import SiameseNet
 
 
 def test_the_junction_columns_count_only_the_junctions_reached():
@@ -60,3 +63,18 @@ def test_a_controller_trained_on_one_map_is_checked_on_another(town, tmp_path): 
     assert controller.stat().st_mtime_ns == trained
     with pytest.raises(SystemExit):  # a case naming a map not given
         main(["--map", f"one={maps['one']}", "--case", "one:two"])
+    # Taught and repeated: the kept controller drives each check route's teach map with each localization.
+    retrieval = tmp_path / "retrieval.ckpt"
+    net = SiameseNet(channels=[8, 16], embedding_dim=16, hidden=32)
+    torch.save({"state_dict": net.state_dict(), "hyper_parameters": dict(net.hparams),
+                "pytorch-lightning_version": L.__version__}, retrieval)
+    with pytest.raises(SystemExit):  # no retrieval network for the maps
+        main([*args, "--teach-repeat", "ground_truth"])
+    assert main([*args, "--teach-repeat", "ground_truth,place_loop", "--retrieval", str(retrieval)]) == 0
+    assert controller.stat().st_mtime_ns == trained
+    text = out.read_text()
+    assert "taught and repeated with ground_truth, place_loop" in text
+    for name in ("ground_truth", "place_loop"):  # a row per seed, and one of the summary
+        assert sum(line.startswith("| one:two") and f"| {name} " in line for line in text.splitlines()) == 2, text
+    junctions = pd.read_csv(tmp_path / "bench.junctions.csv")
+    assert set(junctions.localization) == {"ground_truth", "place_loop"}

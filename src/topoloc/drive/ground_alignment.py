@@ -44,6 +44,12 @@ FORWARD_PROBE_M = 0.5
 #: average against 0.3-0.4 m with none. The simulator's odometry is exact; a vehicle whose odometry drifts along the
 #: road would want a finite value.
 MIN_FORWARD_PEAK = float("inf")
+#: Share of the gap along the chain between the tracker's pose and the localizer's vertex closed at each step (the
+#: position along the road otherwise the model's), and the largest gap that counts (m): the teach drive's odometry
+#: scales the chain (``place.odometry_noise.scale_error``: 3 % by default), so the model's distances fall behind or run
+#: ahead of the chain's by that share of the distance driven; the localizer's vertex does not.
+ALONG_GAIN = 0.1
+ALONG_GATE_M = 10.0
 #: Rows below the horizon skipped: they see the ground too far away to place it.
 HORIZON_MARGIN_PX = 3.0
 
@@ -184,18 +190,23 @@ class PoseTracker:
     ``ahead_m`` after it; the live image is aligned against that vertex's teach image (``teach_image(vertex)``, the
     camera at the vertex's pose on the teach drive) around the prior, and the match replaces the prior when its score
     is at least ``min_score`` (a turn the teach camera saw differently, a crossing whose markings it did not see, keep
-    the prior); its position along the road only where the match peaks there (``min_forward_peak``). The place
-    localizer's vertex is used only to start: at the first step, and after
+    the prior); its position along the road only where the match peaks there (``min_forward_peak``). Along the road
+    the pose is also drawn each step towards the place localizer's vertex, by ``along_gain`` of the gap when the gap
+    is within ``along_gate_m``: the chain is the teach drive's odometry, so its metres are the model's scaled by the
+    teach drive's odometry error, and the localizer places the vehicle on the chain itself. The place localizer's
+    vertex also starts it: at the first step, and after
     ``relocalize_steps`` steps whose matches stayed below ``min_score``, the tracker searches without a prior at the
     localizer's vertex; that answer too counts only with a score of ``min_score`` (the first step without one takes
     the vertex's own pose). While it tracks, the tracker's vertex is :attr:`vertex`: a place localizer a few metres
-    off does not move it.
+    off moves it along the road only by a share of the gap, and never across it.
     """
 
     def __init__(self, aligner: GroundAligner, xy: NDArray[np.float64], teach_image: Callable[[int], NDArray[np.uint8]],
                  spec: VehicleSpec, min_score: float = 0.5, relocalize_steps: int = 10, behind_m: float = 2.0,
-                 ahead_m: float = 5.0, align_every: int = 2, min_forward_peak: float = MIN_FORWARD_PEAK) -> None:
+                 ahead_m: float = 5.0, align_every: int = 2, min_forward_peak: float = MIN_FORWARD_PEAK,
+                 along_gain: float = ALONG_GAIN, along_gate_m: float = ALONG_GATE_M) -> None:
         self.aligner, self.xy, self.teach_image, self.spec = aligner, np.asarray(xy, float), teach_image, spec
+        self.along_gain, self.along_gate_m = float(along_gain), float(along_gate_m)
         self.min_score, self.relocalize_steps = float(min_score), int(relocalize_steps)
         self.behind_m, self.ahead_m, self.align_every = float(behind_m), float(ahead_m), max(1, int(align_every))
         self.min_forward_peak = float(min_forward_peak)
@@ -228,6 +239,17 @@ class PoseTracker:
                 * abs(np.degrees((state.yaw - self.frame(v)[1] + np.pi) % (2 * np.pi) - np.pi)) for v in near]
         return int(near[int(np.argmin(cost))])
 
+    def _pull_along(self, vertex: int) -> None:
+        """Move the pose along the chain towards ``vertex`` (see the class docstring)."""
+        assert self.state is not None
+        origin, yaw = self.frame(self.vertex)
+        c, s = np.cos(yaw), np.sin(yaw)
+        d = self.state.centre(self.spec) - origin
+        gap = float(self._arc[vertex] - (self._arc[self.vertex] + c * d[0] + s * d[1]))
+        if abs(gap) <= self.along_gate_m:
+            shift = self.along_gain * gap
+            self.state = replace(self.state, x=self.state.x + shift * c, y=self.state.y + shift * s)
+
     def update(self, image: NDArray[np.uint8], speed: float, vertex: int, control: Control | None) -> VehicleState:
         """The pose after the last ``control`` (None on the first step), seeing ``image`` at ``speed``, the place
         localizer at ``vertex``: the rear axle's position and the heading in the chain's coordinates."""
@@ -237,6 +259,8 @@ class PoseTracker:
             self.state = replace(step_vehicle(self.state, control, spec), v=float(speed))
         if tracking:
             assert self.state is not None
+            if self.along_gain > 0:
+                self._pull_along(int(vertex))
             self.vertex = self._nearest_vertex(self.state)
             self._since += 1
             if self._since < self.align_every:  # the model's prediction alone between matches
