@@ -187,9 +187,16 @@ def digest(value: Any) -> str:
     return hashlib.sha256(json.dumps(value, sort_keys=True, default=str).encode()).hexdigest()[:10]
 
 
+def training_settings(conf: dict[str, Any]) -> dict[str, Any]:
+    """The settings demonstrations and trainings depend on: ``drive`` but what checks and repeat drives use
+    (``check``, ``follow``), ``place``, ``render``."""
+    drive = {k: v for k, v in conf["drive"].items() if k not in ("check", "follow")}
+    return {"drive": drive, "place": conf["place"], "render": conf["render"]}
+
+
 def demonstration_paths(names: list[str], conf: dict[str, Any], work: Path) -> dict[str, Path]:
     """Where each map's demonstrations are kept (named by the settings that make them)."""
-    key = digest({k: conf[k] for k in ("drive", "place", "render")})
+    key = digest(training_settings(conf))
     return {n: work / f"demonstrations_{n}_{key}.npz" for n in names}
 
 
@@ -218,8 +225,7 @@ def record_demonstrations(names: list[str], conf: dict[str, Any], maps: dict[str
 
 def controller_path(case: str, train_maps: list[str], seed: int, conf: dict[str, Any], work: Path) -> Path:
     """Where the controller of ``case`` and ``seed`` is kept (named by the settings that make it)."""
-    key = digest({"drive": conf["drive"], "place": conf["place"], "render": conf["render"], "maps": train_maps,
-                  "agent": conf["controller"], "seed": seed})
+    key = digest({**training_settings(conf), "maps": train_maps, "agent": conf["controller"], "seed": seed})
     return work / f"controller_{case.replace('+', '_').replace(':', '-')}_{seed}_{key}.ckpt"
 
 
