@@ -16,7 +16,7 @@ from topoloc.drive.episodes import run_episode, speed_limit_ahead
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.ground_alignment import ALONG_GAIN, GroundAligner, PoseTracker
 from topoloc.drive.localization_adapters import GroundTruth
-from topoloc.drive.simulator import RUNNING, SUCCESS, Simulator
+from topoloc.drive.simulator import RUNNING, SUCCESS, Simulator, VehicleState
 from topoloc.drive.taught_routes import teach_map
 from topoloc.place.topometric_map import COMMANDS
 
@@ -105,3 +105,20 @@ def test_the_tracker_keeps_up_with_a_chain_the_teach_odometry_stretched(turn, al
         assert np.abs(lag).max() <= 2, lag
     else:  # the model's metres alone: 5 % short of the chain's, 5 m and more behind before the turn puts it right
         assert np.max(lag) >= 5, lag
+
+
+def test_the_tracker_is_drawn_along_the_chain_only_where_it_runs_straight(turn):
+    _conf, _route, sim, _topo, _lane_s = turn
+    # a chain of a vertex every metre: 60 m east, then a right angle, 60 m south
+    east = np.column_stack([np.arange(0.0, 60.0), np.zeros(60)])
+    south = np.column_stack([np.full(60, 60.0), -np.arange(0.0, 60.0)])
+    chain = np.vstack([east, south])
+    tracker = PoseTracker(GroundAligner(sim.rig), chain, lambda v: None, sim.spec)
+    h = 0.5 * sim.spec.wheelbase_m
+    for vertex, localized, moved in ((20, 25, 0.5), (58, 63, 0.0)):  # on the straight; at the corner
+        tracker.vertex = vertex
+        centre = chain[vertex]
+        tracker.state = VehicleState(centre[0] - h, centre[1], 0.0, 5.0)
+        tracker._pull_along(localized)  # the localizer 5 m further along the chain
+        shift = tracker.state.centre(sim.spec) - centre
+        assert shift == pytest.approx([moved, 0.0], abs=0.02), (vertex, shift)

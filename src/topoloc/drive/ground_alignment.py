@@ -50,6 +50,11 @@ MIN_FORWARD_PEAK = float("inf")
 #: ahead of the chain's by that share of the distance driven; the localizer's vertex does not.
 ALONG_GAIN = 0.1
 ALONG_GATE_M = 10.0
+#: Only where the chain runs straight: within ``ALONG_STRAIGHT_M`` before and after the vertex it turns less than
+#: ``ALONG_STRAIGHT_DEG``. In a turn the place localizer is least sure where along the chain it is, and the turn itself
+#: sets the position along the road before it right (that is across the road after it).
+ALONG_STRAIGHT_M = 10.0
+ALONG_STRAIGHT_DEG = 15.0
 #: Rows below the horizon skipped: they see the ground too far away to place it.
 HORIZON_MARGIN_PX = 3.0
 
@@ -192,7 +197,7 @@ class PoseTracker:
     is at least ``min_score`` (a turn the teach camera saw differently, a crossing whose markings it did not see, keep
     the prior); its position along the road only where the match peaks there (``min_forward_peak``). Along the road
     the pose is also drawn each step towards the place localizer's vertex, by ``along_gain`` of the gap when the gap
-    is within ``along_gate_m``: the chain is the teach drive's odometry, so its metres are the model's scaled by the
+    is within ``along_gate_m`` and the chain runs straight there (:data:`ALONG_STRAIGHT_DEG`): the chain is the teach drive's odometry, so its metres are the model's scaled by the
     teach drive's odometry error, and the localizer places the vehicle on the chain itself. The place localizer's
     vertex also starts it: at the first step, and after
     ``relocalize_steps`` steps whose matches stayed below ``min_score``, the tracker searches without a prior at the
@@ -213,6 +218,7 @@ class PoseTracker:
         self._since = 0
         self._references: dict[int, Reference] = {}
         self._frames: dict[int, tuple[NDArray[np.float64], float]] = {}
+        self._straights: dict[int, bool] = {}
         self._arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(self.xy, axis=0).T))])
         self.state: VehicleState | None = None
         self.vertex = -1
@@ -239,9 +245,25 @@ class PoseTracker:
                 * abs(np.degrees((state.yaw - self.frame(v)[1] + np.pi) % (2 * np.pi) - np.pi)) for v in near]
         return int(near[int(np.argmin(cost))])
 
+    def _at_arc(self, arc: float) -> int:
+        """The vertex whose arc along the chain is nearest ``arc``."""
+        k = int(np.clip(np.searchsorted(self._arc, arc), 1, len(self._arc) - 1))
+        return k - 1 if arc - self._arc[k - 1] < self._arc[k] - arc else k
+
+    def _straight(self, vertex: int) -> bool:
+        """Whether the chain turns by less than :data:`ALONG_STRAIGHT_DEG` from ``ALONG_STRAIGHT_M`` before the vertex
+        to as far after it."""
+        if vertex not in self._straights:
+            here = float(self._arc[vertex])
+            before, after = (self.frame(self._at_arc(here + d))[1] for d in (-ALONG_STRAIGHT_M, ALONG_STRAIGHT_M))
+            self._straights[vertex] = abs((after - before + np.pi) % (2 * np.pi) - np.pi) < np.radians(ALONG_STRAIGHT_DEG)
+        return self._straights[vertex]
+
     def _pull_along(self, vertex: int) -> None:
-        """Move the pose along the chain towards ``vertex`` (see the class docstring)."""
+        """Move the pose along the chain towards ``vertex`` (see the class docstring), where the chain runs straight."""
         assert self.state is not None
+        if not self._straight(self.vertex):
+            return
         origin, yaw = self.frame(self.vertex)
         c, s = np.cos(yaw), np.sin(yaw)
         d = self.state.centre(self.spec) - origin
