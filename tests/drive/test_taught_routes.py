@@ -101,8 +101,9 @@ def test_the_tracker_keeps_up_with_a_chain_the_teach_odometry_stretched(turn, al
         if obs is None:
             break
     assert status == SUCCESS
-    if along_gain > 0:  # the vertex the localizer gives draws it along
-        assert np.abs(lag).max() <= 2, lag
+    lag = np.asarray(lag)
+    if along_gain > 0:  # the vertex the localizer gives draws it along on the straight; not in the turn (a metre more)
+        assert np.abs(lag[:200]).max() <= 1 and np.abs(lag).max() <= 3, lag
     else:  # the model's metres alone: 5 % short of the chain's, 5 m and more behind before the turn puts it right
         assert np.max(lag) >= 5, lag
 
