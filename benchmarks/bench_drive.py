@@ -29,10 +29,11 @@ import torch
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import load
 from topoloc.drive.agents import DLMAgent, LPAgent, TeachImages
-from topoloc.drive.camera import image_shape, place_window
+from topoloc.drive.camera import image_shape
 from topoloc.drive.controller import AGENT_NAMES, load_controller
 from topoloc.drive.demonstrations import as_input
-from topoloc.drive.localization_adapters import GroundTruth, PlaceLocalization
+from topoloc.drive.follow_route import place_localization
+from topoloc.drive.localization_adapters import GroundTruth
 from topoloc.drive.repeat_routes import vertex_lane_s
 from topoloc.drive.routes import evaluation_route, make_simulator
 from topoloc.drive.simulator import RUNNING, Control
@@ -40,7 +41,6 @@ from topoloc.drive.topo_lp import CONTROLLERS
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.place.network import load_model
 from topoloc.place.topometric_map import TopometricMap
-from topoloc.registry import make
 
 TARGET_STEPS_PER_S = 100.0
 
@@ -68,8 +68,8 @@ def speed(conf: dict, root: Path, steps: int, localizer: str, agents: list[str])
     for name, agent, loc in runs:
         model = load_controller(root / "drive" / agent / "controller.ckpt", image_shape(conf), "drive.camera",
                                 CONTROLLERS[agent]) if agent else None
-        localization = (PlaceLocalization(make(localizer), topo, retrieval, place["localize"], place_window(conf))
-                        if loc == "place" else GroundTruth(lane_s) if loc else None)
+        localization = (place_localization(localizer, topo, retrieval, conf) if loc == "place"
+                        else GroundTruth(lane_s) if loc else None)
         done, status, driver = 0, RUNNING, None
         started = time.perf_counter()
         while done < steps:

@@ -52,7 +52,6 @@ import torch
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import deep_merge, dotted_overrides, load
 from topoloc.drive.agents import DLMAgent, LPAgent, TeachImages
-from topoloc.drive.camera import place_window
 from topoloc.drive.controller import load_controller
 from topoloc.drive.controller_training import fit
 from topoloc.drive.demonstrations import (
@@ -63,6 +62,7 @@ from topoloc.drive.demonstrations import (
 )
 from topoloc.drive.episodes import run_episode, speed_limit_ahead
 from topoloc.drive.expert import Expert, ExpertSettings
+from topoloc.drive.follow_route import place_localization
 from topoloc.drive.junctions import (
     NOT_REACHED,
     TAKEN,
@@ -70,7 +70,7 @@ from topoloc.drive.junctions import (
     roundabout_ways,
     route_junctions,
 )
-from topoloc.drive.localization_adapters import GroundTruth, PlaceLocalization
+from topoloc.drive.localization_adapters import GroundTruth
 from topoloc.drive.on_policy import CHECK_STREAM, check_metrics, check_route
 from topoloc.drive.routes import make_simulator, teach_route
 from topoloc.drive.simulator import OUTCOMES, SUCCESS
@@ -81,7 +81,7 @@ from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
 from topoloc.localizer import PLACE_OBSERVATIONS
 from topoloc.place.network import load_model
-from topoloc.registry import check_names, make
+from topoloc.registry import check_names
 
 REPO = Path(__file__).resolve().parent.parent
 log = logging.getLogger("bench_drive_maps")
@@ -171,9 +171,8 @@ def _teach_repeat(task: tuple[str, str, int, str, list[str]]) -> tuple[str, int,
     out = {}
     for name in localizations:
         driver = LPAgent(controller, taught.topo, teach) if agent == "lp" else DLMAgent(controller, taught.topo)
-        localization = (GroundTruth(taught.lane_s) if name == "ground_truth" else
-                        PlaceLocalization(make(name, PLACE_OBSERVATIONS), taught.topo, retrieval, place["localize"],
-                                          place_window(conf)))
+        localization = (GroundTruth(taught.lane_s) if name == "ground_truth"
+                        else place_localization(name, taught.topo, retrieval, conf))
         episode = run_episode(sim, driver, localization, taught.topo, condition, seed, conf, 0, limit)
         share = min(1.0, episode.progress_m / max(route.length_m - sim.spec.goal_m, 1e-9))
         rows = junction_results(junctions, episode.s, episode.speed, episode.outcome, float(jconf["before_m"]),

@@ -69,10 +69,11 @@ from topoloc.render.conditions import check_conditions
 log = logging.getLogger(__name__)
 
 
-def _place_localization(name: str, topo: TopometricMap, model: Any, localize: dict[str, Any],
-                        window: tuple[slice, slice]) -> PlaceLocalization:
-    """A new localization by the registered place localizer ``name`` (on the place images' ``window`` of each image)."""
-    return PlaceLocalization(cast(PlaceLocalizer, make(name, PLACE_OBSERVATIONS)), topo, model, localize, window)
+def place_localization(name: str, topo: TopometricMap, model: Any, conf: dict[str, Any]) -> PlaceLocalization:
+    """A new localization by the registered place localizer ``name`` on ``topo``, scored by the retrieval ``model``
+    (``conf``: the ``drive``, ``place`` and ``render`` slices: ``place.localize`` and the place images' window)."""
+    return PlaceLocalization(cast(PlaceLocalizer, make(name, PLACE_OBSERVATIONS)), topo, model, conf["place"]["localize"],
+                             place_window(conf))
 
 
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
@@ -116,7 +117,7 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         junctions = route_junctions(graph, route, roundabouts, float(jconf["cluster_m"]), float(jconf["around_m"]))
         locs = {"ground_truth": partial(GroundTruth, lane_s)}
         for name in place_names:
-            locs[name] = partial(_place_localization, name, topo, retrieval, place["localize"], place_window(conf))
+            locs[name] = partial(place_localization, name, topo, retrieval, conf)
         for condition, repeat, agent, loc in runs + expert_runs:
             seed = int(np.random.SeedSequence([int(drive["seed"]), 59, names["repeat"].index(condition), repeat, k])
                        .generate_state(1)[0])

@@ -5,8 +5,8 @@ localization on routes the pipeline never taught (``benchmarks.bench_drive_maps 
 The expert drives the route once under ``place.teach_condition`` (no noise, from the lane's start). Every
 ``every_steps``-th control step is a vertex: the controller camera's image there cut to the place images' window
 (:func:`topoloc.drive.camera.place_window`, the camera the place images are rendered with) and embedded by the
-retrieval network, its raw-correlation descriptor, its position from the teach drive's path through the odometry
-noise model (``place.odometry_noise``; the true position kept as ``gt_xy``), and the route's command at the vehicle's
+retrieval network, its raw-correlation descriptor and its position from the teach drive's path through the odometry
+noise model, as the pipeline's map (:func:`topoloc.place.topometric_map.teach_vertices`), and the route's command at the vehicle's
 progress along the lane (the rule of the topometric map's commands, :mod:`topoloc.drive.drive_route`). Beside the
 map: each vertex's progress along the lane (what :class:`topoloc.drive.localization_adapters.GroundTruth` reads) and
 the expert's target speed there (the speed limit of :func:`topoloc.drive.episodes.speed_limit_ahead`).
@@ -24,9 +24,7 @@ from topoloc.drive.camera import place_window
 from topoloc.drive.demonstrations import as_input
 from topoloc.drive.expert import Expert
 from topoloc.drive.simulator import RUNNING, Simulator
-from topoloc.place.odometry import noisy_odometry
-from topoloc.place.topometric_localization import correlation_descriptors
-from topoloc.place.topometric_map import TopometricMap
+from topoloc.place.topometric_map import TopometricMap, teach_vertices
 
 
 @dataclass(frozen=True)
@@ -63,10 +61,7 @@ def teach_map(sim: Simulator, expert: Expert, retrieval: Any, conf: dict[str, An
             break
         obs = next_obs
     stack = np.stack(images)
-    gt_xy, heading = np.asarray(xy), np.asarray(yaw)
-    odometry, _ = noisy_odometry(gt_xy, heading, place["odometry_noise"], np.random.default_rng([int(seed), 23]))
     command = np.array([int(sim.route.command_at(v)) for v in s], np.int64)
-    embedding = retrieval.embed(stack).astype(np.float32)
-    descriptor = correlation_descriptors(stack, tuple(place["localize"]["correlation_size"]))
-    topo = TopometricMap(embedding, descriptor, odometry.xy, command, gt_xy, str(place["teach_condition"]))
+    topo, _ = teach_vertices(stack, retrieval.embed(stack), np.asarray(xy), np.asarray(yaw), command,
+                             str(place["teach_condition"]), place, int(seed))
     return TaughtRoute(topo, np.maximum.accumulate(np.asarray(s, float)), np.asarray(speed, float), status)

@@ -158,6 +158,17 @@ def vertex_commands(xy: NDArray[np.float64], intersections: list[Intersection], 
     return command
 
 
+def teach_vertices(images: NDArray[np.uint8], embedding: NDArray[np.float32], xy: NDArray[np.float64],
+                   yaw: NDArray[np.float64], command: NDArray[np.int64], condition: str, conf: dict[str, Any],
+                   seed: int) -> tuple[TopometricMap, float]:
+    """The map of teach frames (their images, embeddings, true poses and commands; ``conf`` the ``place`` slice): the
+    raw-correlation descriptors, and the positions from path integration of the odometry through the noise model of
+    ``place.odometry_noise`` drawn from ``seed``; and the drawn scale error."""
+    descriptor = correlation_descriptors(images, tuple(conf["localize"]["correlation_size"]))
+    odometry, scale_error = noisy_odometry(xy, yaw, conf["odometry_noise"], np.random.default_rng([int(seed), 23]))
+    return TopometricMap(embedding.astype(np.float32), descriptor, odometry.xy, command, xy, condition), scale_error
+
+
 def build_map(teach: PlaceSet, graph: RoadGraph, model: Any, conf: dict[str, Any]) -> tuple[TopometricMap, list[Intersection], dict[str, float]]:
     """The map of the teach set's single condition; ``conf`` is the ``place`` config slice."""
     if len(teach.conditions) != 1:
@@ -168,15 +179,13 @@ def build_map(teach: PlaceSet, graph: RoadGraph, model: Any, conf: dict[str, Any
     started = time.perf_counter()
     embedding = model.embed(images)
     embed_s = time.perf_counter() - started
-    descriptor = correlation_descriptors(images, tuple(conf["localize"]["correlation_size"]))
-    rng = np.random.default_rng([int(conf["seed"]), 23])
-    odometry, scale_error = noisy_odometry(teach.xy, teach.yaw, conf["odometry_noise"], rng)
     cmd = conf["command"]
     crossings = route_intersections(graph, teach.edge, teach.xy, float(cmd["lookahead_m"]), float(cmd["straight_deg"]),
                                     float(cmd["distance_m"]))
     command = vertex_commands(teach.xy, crossings, float(cmd["distance_m"]))
-    topo = TopometricMap(embedding.astype(np.float32), descriptor, odometry.xy, command, teach.xy, teach.conditions[0])
-    drift = np.hypot(*(odometry.xy - teach.xy).T)
+    topo, scale_error = teach_vertices(images, embedding, teach.xy, teach.yaw, command, teach.conditions[0], conf,
+                                       int(conf["seed"]))
+    drift = np.hypot(*(topo.xy - teach.xy).T)
     facts = {"vertices": float(len(topo)), "length_m": float(topo.s[-1]),
              "true_length_m": float(np.hypot(*np.diff(teach.xy, axis=0).T).sum()),
              "scale_error": scale_error, "drift_end_m": float(drift[-1]), "drift_max_m": float(drift.max()),
