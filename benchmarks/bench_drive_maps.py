@@ -8,7 +8,8 @@ them)::
         --map kitti00=results/kitti00 --case helsinki+heidelberg:kitti00 --case helsinki:kitti00 \\
         [--configfile config/config.yaml --configfile config/experiments/drive_paper.yaml ...] \\
         [--set drive.check.routes=100 ...] [--agent lp] [--seeds 0,1,2] [--workers N] [--train-workers N]
-        [--train-only] [--teach-repeat ground_truth,place_loop --retrieval CKPT] [--work DIR] [--out FILE]
+        [--train-only] [--teach-repeat ground_truth,place_loop --retrieval CKPT] [--route-length-m 300,500]
+        [--work DIR] [--out FILE]
 
 A case ``TRAIN+TRAIN:TEST`` trains one controller per seed on the named maps' demonstrations pooled
 (:meth:`topoloc.drive.demonstrations.Demonstrations.pool`, what ``drive.demonstrations_from`` does in the
@@ -18,6 +19,9 @@ order (later ones win), then ``--set``. Demonstration routes and check routes ar
 they run on ``--workers`` processes; trainings run one after the other, or ``--train-workers`` at once (processes
 sharing the GPU), on the configured accelerator (``drive.train.accelerator``: a GPU where there is one). A map's
 demonstrations and each trained controller are kept in ``--work`` and reused by a later run with the same settings.
+Check routes are as long as the demonstrations' (``drive.demonstrations.route_length_m``), or with
+``--route-length-m MIN,MAX`` each as long as drawn evenly between the two (:func:`check_length`: route ``r`` has the
+same length on every map and seed, so the controllers are checked on equal terms).
 
 With ``--teach-repeat``, each check route is taught and repeated as ``follow_route`` does on the teach route: the
 expert's teach drive under ``place.teach_condition`` gives the route's topometric map in memory
@@ -90,9 +94,11 @@ log = logging.getLogger("bench_drive_maps")
 _STATE: dict[str, Any] = {}
 
 
-def _init_worker(conf: dict[str, Any], maps: dict[str, str], retrieval: str | None = None) -> None:
+def _init_worker(conf: dict[str, Any], maps: dict[str, str], retrieval: str | None = None,
+                 check_length_m: tuple[float, float] | None = None) -> None:
     torch.set_num_threads(1)
-    _STATE.update(conf=conf, maps=maps, loaded={}, graphs={}, roundabouts={}, models={}, retrieval=retrieval)
+    _STATE.update(conf=conf, maps=maps, loaded={}, graphs={}, roundabouts={}, models={}, retrieval=retrieval,
+                  check_length_m=check_length_m, check_routes={})
 
 
 def _map(name: str) -> tuple[Any, Any, Any]:
@@ -107,6 +113,28 @@ def _map(name: str) -> tuple[Any, Any, Any]:
                                   lambda route, g=graph, o=osm: make_simulator(o, g, route, conf))
         _STATE["graphs"][name] = (graph, osm)
     return _STATE["loaded"][name]
+
+
+def check_length(r: int, seed: int, length_m: tuple[float, float]) -> float:
+    """Check route ``r``'s length (m): drawn evenly in ``length_m`` (its own stream, the same for every map, training
+    seed and run), to the metre."""
+    low, high = length_m
+    rng = np.random.default_rng([int(seed), CHECK_STREAM, int(r), 1])
+    return float(round(low + (high - low) * rng.random()))
+
+
+def _check_routes(name: str, r: int) -> Any:
+    """The maker of check route ``r`` of map ``name``: the demonstrations' (their route length), or one of a length
+    drawn by :func:`check_length` with ``--route-length-m``."""
+    _, make_route, _ = _map(name)
+    lengths = _STATE["check_length_m"]
+    if lengths is None:
+        return make_route
+    length = check_length(r, int(_STATE["conf"]["drive"]["seed"]), lengths)
+    key = (name, length)
+    if key not in _STATE["check_routes"]:
+        _STATE["check_routes"][key] = TrainingRoutes(make_route.graph, _STATE["conf"], length)
+    return _STATE["check_routes"][key]
 
 
 def _demonstrate(task: tuple[str, int]) -> tuple[str, int, Any]:
@@ -134,9 +162,9 @@ def _junctions(test: str, sim: Any) -> list[Any]:
 def _check(task: tuple[str, str, int, str]) -> tuple[str, int, tuple[str, str, float], list[dict[str, Any]]]:
     key, model_path, r, test = task
     conf = _STATE["conf"]
-    avoid, make_route, make_sim = _map(test)
+    avoid, _, make_sim = _map(test)
     made = []  # the route's simulator, for where the drive ended
-    row = check_route(r, _controller(model_path), str(conf["controller"]), conf, avoid, make_route,
+    row = check_route(r, _controller(model_path), str(conf["controller"]), conf, avoid, _check_routes(test, r),
                       lambda route: made.append(make_sim(route)) or made[-1])
     sim = made[-1]
     jconf = conf["drive"]["follow"]["junctions"]
@@ -155,8 +183,8 @@ def _teach_repeat(task: tuple[str, str, int, str, list[str]]) -> tuple[str, int,
     if "retrieval_model" not in _STATE:
         _STATE["retrieval_model"] = load_model(_STATE["retrieval"])
     retrieval, controller, agent = _STATE["retrieval_model"], _controller(model_path), str(conf["controller"])
-    avoid, make_route, make_sim = _map(test)
-    route = training_route(r, conf, avoid, make_route, stream=CHECK_STREAM)  # the check's route r
+    avoid, _, make_sim = _map(test)
+    route = training_route(r, conf, avoid, _check_routes(test, r), stream=CHECK_STREAM)  # the check's route r
     sim = make_sim(route)
     conditions = [str(c) for c in place["repeat_conditions"]]
     condition = conditions[r % len(conditions)]
@@ -290,6 +318,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--teach-repeat", default="", metavar="LOCALIZATION,...",
                         help="teach each check route and repeat it with these localizations (ground_truth, place_loop, ...)")
     parser.add_argument("--retrieval", default=None, help="the place network of --teach-repeat's maps (a retrieval model.ckpt)")
+    parser.add_argument("--route-length-m", default=None, metavar="MIN,MAX",
+                        help="check routes of lengths drawn evenly in MIN-MAX m (default: the demonstrations' route length)")
     parser.add_argument("--work", default="results/bench_drive_maps", help="demonstrations and controllers, kept")
     add_out_option(parser, "bench_drive_maps")
     args = parser.parse_args(argv)
@@ -308,6 +338,15 @@ def main(argv: list[str] | None = None) -> int:
         check_names([n for n in localizations if n != "ground_truth"], "--teach-repeat", PLACE_OBSERVATIONS)
         if not args.retrieval or not Path(args.retrieval).is_file():
             parser.error(f"--teach-repeat needs --retrieval, a retrieval model.ckpt (got {args.retrieval})")
+    check_length_m = None
+    if args.route_length_m:
+        try:
+            low, high = (float(v) for v in (args.route_length_m.split(",") * 2)[:2])
+        except ValueError:
+            parser.error(f"--route-length-m: MIN,MAX in metres (got {args.route_length_m!r})")
+        if not 0 < low <= high:
+            parser.error(f"--route-length-m: 0 < MIN <= MAX (got {args.route_length_m!r})")
+        check_length_m = (low, high)
     seeds = [int(s) for s in args.seeds.split(",")]
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
@@ -315,7 +354,7 @@ def main(argv: list[str] | None = None) -> int:
     models = {(case, seed): controller_path(case, train_maps, seed, conf, work) for case, train_maps, _ in cases
               for seed in seeds}
     spawn = multiprocessing.get_context("spawn")  # not forked: the trainings may have started CUDA in this process
-    with ProcessPoolExecutor(args.workers, mp_context=spawn, initializer=_init_worker, initargs=(conf, maps, args.retrieval)) as pool:
+    with ProcessPoolExecutor(args.workers, mp_context=spawn, initializer=_init_worker, initargs=(conf, maps, args.retrieval, check_length_m)) as pool:
         todo = [(case, train_maps, seed) for case, train_maps, _ in cases for seed in seeds
                 if not (models[(case, seed)].exists() and models[(case, seed)].with_suffix(".json").exists())]
         if todo:
@@ -375,7 +414,9 @@ def main(argv: list[str] | None = None) -> int:
     counts = [c for c in table.columns if c.startswith("success_") or c in OUTCOMES]
     table[counts] = table[counts].fillna(0.0)  # a condition or failure a seed did not meet: none of it
     how = f", taught and repeated with {', '.join(localizations)}" if localizations else ""
-    text = (f"{args.agent}, {routes} check routes per case and seed{how}\n\n"
+    length = (f"{check_length_m[0]:.0f}-{check_length_m[1]:.0f} m" if check_length_m
+              else f"{float(conf['drive']['demonstrations']['route_length_m']):.0f} m")
+    text = (f"{args.agent}, {routes} check routes of {length} per case and seed{how}\n\n"
             + table.to_markdown(index=False, floatfmt=".2f")
             + "\n\n" + summary(table).to_markdown(index=False))
     with markdown_copy(args.out):

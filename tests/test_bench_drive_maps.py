@@ -4,16 +4,20 @@ from __future__ import annotations
 
 import math
 import shutil
+from pathlib import Path
 
 import lightning as L
 import pandas as pd
 import pytest
 import torch
 
-from benchmarks.bench_drive_maps import junction_columns, main, summary
+from benchmarks.bench_drive_maps import _check_routes, _init_worker, check_length, junction_columns, main, summary
 from tests.render.conftest import town  # noqa: F401 (the fixture)
+from topoloc.config import dotted_overrides, load
 from topoloc.drive.junctions import FAILED, NOT_REACHED, TAKEN
 from topoloc.place.network import SiameseNet
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def test_the_junction_columns_count_only_the_junctions_reached():
@@ -51,7 +55,7 @@ def test_a_controller_trained_on_one_map_is_checked_on_another(town, tmp_path): 
                  "drive.train.max_epochs=1", "drive.train.batches_per_epoch=2", "drive.check.routes=2"]
     assert main(args) == 0
     text = out.read_text()
-    assert "| one:two" in text and "2 check routes" in text
+    assert "| one:two" in text and "2 check routes of 150 m per case" in text
     junctions = pd.read_csv(tmp_path / "bench.junctions.csv")
     assert set(junctions.case) == {"one:two"} and set(junctions.result) <= {TAKEN, FAILED, NOT_REACHED}
     assert len(list((tmp_path / "work").glob("controller_one-two_0_*.ckpt"))) == 1
@@ -78,3 +82,28 @@ def test_a_controller_trained_on_one_map_is_checked_on_another(town, tmp_path): 
         assert sum(line.startswith("| one:two") and f"| {name} " in line for line in text.splitlines()) == 2, text
     junctions = pd.read_csv(tmp_path / "bench.junctions.csv")
     assert set(junctions.localization) == {"ground_truth", "place_loop"}
+
+
+def test_check_routes_are_drawn_in_a_range_of_lengths_the_same_on_every_map(town, tmp_path):  # noqa: F811 (the fixture)
+    lengths = [check_length(r, 0, (300.0, 500.0)) for r in range(50)]
+    assert all(300 <= x <= 500 for x in lengths) and max(lengths) - min(lengths) > 100
+    assert lengths == [check_length(r, 0, (300.0, 500.0)) for r in range(50)]  # drawn again: the same
+    assert check_length(3, 0, (150.0, 150.0)) == 150.0
+    for name in ("one", "two"):
+        (tmp_path / name / "graph").mkdir(parents=True)
+        (tmp_path / name / "osm").mkdir()
+        shutil.copy(town["graph"], tmp_path / name / "graph" / "graph.graphml")
+        shutil.copy(town["osm"], tmp_path / name / "osm" / "region.osm")
+    conf = load(REPO / "config" / "config.yaml", dotted_overrides(["render.length_m=160"]))
+    threads = torch.get_num_threads()
+    try:
+        _init_worker(conf, {n: str(tmp_path / n) for n in ("one", "two")}, None, (120.0, 180.0))
+        made = {n: [_check_routes(n, r).length_m for r in range(6)] for n in ("one", "two")}
+        _init_worker(conf, {"one": str(tmp_path / "one")})
+        default = _check_routes("one", 0).length_m
+    finally:
+        torch.set_num_threads(threads)
+    assert made["one"] == made["two"] and all(120 <= x <= 180 for x in made["one"]) and len(set(made["one"])) > 1
+    assert default == conf["drive"]["demonstrations"]["route_length_m"]
+    with pytest.raises(SystemExit):  # MIN above MAX
+        main(["--map", f"one={tmp_path / 'one'}", "--case", "one:one", "--route-length-m", "300,200"])
