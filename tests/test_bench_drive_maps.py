@@ -11,7 +11,14 @@ import pandas as pd
 import pytest
 import torch
 
-from benchmarks.bench_drive_maps import _check_routes, _init_worker, check_length, junction_columns, main, summary
+from benchmarks.bench_drive_maps import (
+    _check_routes,
+    _init_worker,
+    check_length,
+    junction_columns,
+    main,
+    summary,
+)
 from tests.render.conftest import town  # noqa: F401 (the fixture)
 from topoloc.config import dotted_overrides, load
 from topoloc.drive.junctions import FAILED, NOT_REACHED, TAKEN
