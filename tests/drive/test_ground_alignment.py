@@ -12,7 +12,7 @@ import pytest
 from tests.drive.conftest import lane_map, right_turn
 from topoloc.drive.agents import LPAgent, TeachImages
 from topoloc.drive.expert import Expert, ExpertSettings
-from topoloc.drive.ground_alignment import GroundAligner, PoseTracker
+from topoloc.drive.ground_alignment import MATCH_GAIN, GroundAligner, PoseTracker
 from topoloc.drive.local_path import PLANE_POINTS, chain_frame
 from topoloc.drive.simulator import RUNNING, Control, Simulator
 from topoloc.render.rig import StereoRig
@@ -105,3 +105,22 @@ def test_the_tracker_searches_anew_after_its_matches_fail(turn, relocalize_steps
     pose = tracker.update(render.render(at + 1.2 * right, yaw, 1), 0.0, vertex, Control(0.0, 0.0))
     error = float(np.hypot(*(pose.centre(sim.spec) - (at + 1.2 * right))))
     assert (error < 0.3) == found, error
+
+
+def test_a_tracked_match_moves_the_pose_a_share_of_the_way_to_it(turn):
+    _drive, _conf, _route, sim, topo, _lane_s = turn
+    vertex = 30
+    at, yaw = chain_frame(topo.gt_xy, vertex)
+    right = np.array([np.sin(yaw), -np.cos(yaw)])
+    tracker = PoseTracker(GroundAligner(sim.rig), topo.xy, TeachImages(sim, topo, "clear_noon", 1, True), sim.spec,
+                          align_every=1)
+    render = sim.renderer("overcast", 4)
+    start = tracker.update(render.render(at, yaw, 0), 0.0, vertex, None)  # no prior: the match's pose itself
+    aside = [float(np.dot(start.centre(sim.spec) - at, right))]
+    for t in range(1, 16):  # the vehicle stands 0.35 m right of the teach drive (within the tracked search)
+        pose = tracker.update(render.render(at + 0.35 * right, yaw, t), 0.0, vertex, Control(0.0, 0.0))
+        aside.append(float(np.dot(pose.centre(sim.spec) - at, right)))
+    assert abs(aside[0]) < 0.15
+    first = (aside[1] - aside[0]) / (0.35 - aside[0])  # the share of the gap the first match closed
+    assert 0.5 * MATCH_GAIN < first < 0.5, aside  # one match, 1-2 m off in a turn at night, would move it as little
+    assert abs(aside[-1] - 0.35) < 0.08, aside  # a few matches, the whole of it

@@ -55,6 +55,12 @@ ALONG_GATE_M = 10.0
 #: sets the position along the road before it right (that is across the road after it).
 ALONG_STRAIGHT_M = 10.0
 ALONG_STRAIGHT_DEG = 15.0
+#: Share of the way from the pose the vehicle's model predicts to a trusted tracked match's that the pose moves, across
+#: the road and in heading (a search without a prior sets it whole). Between matches the model moves as the vehicle
+#: does; in a turn, or at night, a match over ``min_score`` is now and then 1-2 m off across the road, and one such
+#: match took the pose out of the next search's reach (Heidelberg's roundabout and U-turn routes at night:
+#: docs/route_following.md, "What fails on Heidelberg at night").
+MATCH_GAIN = 0.3
 #: Rows below the horizon skipped: they see the ground too far away to place it.
 HORIZON_MARGIN_PX = 3.0
 
@@ -193,9 +199,10 @@ class PoseTracker:
     vertex to align against is the one nearest that
     prior (by position, and by heading at :data:`HEADING_M_PER_DEG`) from ``behind_m`` before the last one to
     ``ahead_m`` after it; the live image is aligned against that vertex's teach image (``teach_image(vertex)``, the
-    camera at the vertex's pose on the teach drive) around the prior, and the match replaces the prior when its score
-    is at least ``min_score`` (a turn the teach camera saw differently, a crossing whose markings it did not see, keep
-    the prior); its position along the road only where the match peaks there (``min_forward_peak``). Along the road
+    camera at the vertex's pose on the teach drive) around the prior, and when the match scores at least ``min_score``
+    the pose moves :data:`MATCH_GAIN` of the way to it across the road and in heading (a turn the teach camera saw
+    differently, a crossing whose markings it did not see, keep the prior); along the road only where the match peaks
+    there (``min_forward_peak``). Along the road
     the pose is also drawn each step towards the place localizer's vertex, by ``along_gain`` of the gap when the gap
     is within ``along_gate_m`` and the chain runs straight there (:data:`ALONG_STRAIGHT_DEG`): the chain is the teach
     drive's odometry, so its metres are the model's scaled by the teach drive's odometry error, and the localizer
@@ -304,6 +311,9 @@ class PoseTracker:
             if prior is not None and (np.isinf(self.min_forward_peak) or self.aligner.forward_peak(
                     self.reference(self.vertex), image, found) < self.min_forward_peak):
                 forward = prior[0]  # a road that looks alike a little further on: the model's along-track estimate
+            if prior is not None:
+                left = prior[1] + MATCH_GAIN * (left - prior[1])
+                turn = prior[2] + MATCH_GAIN * ((turn - prior[2] + np.pi) % (2 * np.pi) - np.pi)
             heading = yaw + turn
             centre = origin + np.array([c * forward - s * left, s * forward + c * left])
             h = 0.5 * spec.wheelbase_m
