@@ -340,10 +340,13 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(f"--teach-repeat needs --retrieval, a retrieval model.ckpt (got {args.retrieval})")
     check_length_m = None
     if args.route_length_m:
+        parts = args.route_length_m.split(",")
         try:
-            low, high = (float(v) for v in (args.route_length_m.split(",") * 2)[:2])
+            low, high = float(parts[0]), float(parts[-1])
         except ValueError:
             parser.error(f"--route-length-m: MIN,MAX in metres (got {args.route_length_m!r})")
+        if len(parts) > 2:
+            parser.error(f"--route-length-m: MIN,MAX or one length (got {args.route_length_m!r})")
         if not 0 < low <= high:
             parser.error(f"--route-length-m: 0 < MIN <= MAX (got {args.route_length_m!r})")
         check_length_m = (low, high)

@@ -112,5 +112,6 @@ def test_check_routes_are_drawn_in_a_range_of_lengths_the_same_on_every_map(town
         torch.set_num_threads(threads)
     assert made["one"] == made["two"] and all(120 <= x <= 180 for x in made["one"]) and len(set(made["one"])) > 1
     assert default == conf["drive"]["demonstrations"]["route_length_m"]
-    with pytest.raises(SystemExit):  # MIN above MAX
-        main(["--map", f"one={tmp_path / 'one'}", "--case", "one:one", "--route-length-m", "300,200"])
+    for bad in ("300,200", "300,400,500", "300,x"):  # MIN above MAX, three lengths, not a number
+        with pytest.raises(SystemExit):
+            main(["--map", f"one={tmp_path / 'one'}", "--case", "one:one", "--route-length-m", bad])
