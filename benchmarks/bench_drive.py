@@ -28,16 +28,16 @@ import torch
 
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import load
-from topoloc.drive.agents import DLMAgent, LPAgent, TeachImages
+from topoloc.drive.agents import TeachImages, controller_agent
 from topoloc.drive.camera import image_shape
-from topoloc.drive.controller import AGENT_NAMES, load_controller
+from topoloc.drive.controller import AGENT_NAMES
 from topoloc.drive.demonstrations import as_input
 from topoloc.drive.follow_route import place_localization
 from topoloc.drive.localization_adapters import GroundTruth
 from topoloc.drive.repeat_routes import vertex_lane_s
 from topoloc.drive.routes import evaluation_route, make_simulator
 from topoloc.drive.simulator import RUNNING, Control
-from topoloc.drive.topo_lp import CONTROLLERS
+from topoloc.drive.topo_lp import load_controller
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.place.network import load_model
 from topoloc.place.topometric_map import TopometricMap
@@ -66,8 +66,8 @@ def speed(conf: dict, root: Path, steps: int, localizer: str, agents: list[str])
         runs += [(f"{name}: render + controller", agent, "ground_truth"), (f"{name}: closed loop", agent, "place")]
     out = {}
     for name, agent, loc in runs:
-        model = load_controller(root / "drive" / agent / "controller.ckpt", image_shape(conf), "drive.camera",
-                                CONTROLLERS[agent]) if agent else None
+        model = (load_controller(root / "drive" / agent / "controller.ckpt", image_shape(conf), "drive.camera") if agent
+                 else None)
         localization = (place_localization(localizer, topo, retrieval, conf) if loc == "place"
                         else GroundTruth(lane_s) if loc else None)
         done, status, driver = 0, RUNNING, None
@@ -77,8 +77,7 @@ def speed(conf: dict, root: Path, steps: int, localizer: str, agents: list[str])
                 obs = sim.reset(condition, 1)
                 if localization is not None:
                     localization.start(np.random.default_rng(0))
-                driver = (None if model is None else LPAgent(model, topo, teach) if agent == "lp"
-                          else DLMAgent(model, topo))
+                driver = None if model is None else controller_agent(model, topo, teach)
             vertex = 0
             image = as_input(obs.image, color)
             if localization is not None:

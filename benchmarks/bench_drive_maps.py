@@ -55,8 +55,7 @@ import torch
 
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import deep_merge, dotted_overrides, load
-from topoloc.drive.agents import DLMAgent, LPAgent, TeachImages
-from topoloc.drive.controller import load_controller
+from topoloc.drive.agents import TeachImages, controller_agent
 from topoloc.drive.controller_training import fit
 from topoloc.drive.demonstrations import (
     Demonstrations,
@@ -79,7 +78,7 @@ from topoloc.drive.on_policy import CHECK_STREAM, check_metrics, check_route
 from topoloc.drive.routes import make_simulator, teach_route
 from topoloc.drive.simulator import OUTCOMES, SUCCESS
 from topoloc.drive.taught_routes import teach_map
-from topoloc.drive.topo_lp import CONTROLLERS
+from topoloc.drive.topo_lp import CONTROLLERS, load_controller
 from topoloc.drive.turn_routes import TrainingRoutes
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import atomic_path
@@ -146,7 +145,7 @@ def _demonstrate(task: tuple[str, int]) -> tuple[str, int, Any]:
 def _controller(model_path: str) -> Any:
     """The controller at ``model_path`` (this process's copy, loaded once)."""
     if model_path not in _STATE["models"]:
-        _STATE["models"][model_path] = load_controller(model_path, cls=CONTROLLERS[str(_STATE["conf"]["controller"])]).eval()
+        _STATE["models"][model_path] = load_controller(model_path).eval()
     return _STATE["models"][model_path]
 
 
@@ -164,7 +163,7 @@ def _check(task: tuple[str, str, int, str]) -> tuple[str, int, tuple[str, str, f
     conf = _STATE["conf"]
     avoid, _, make_sim = _map(test)
     made = []  # the route's simulator, for where the drive ended
-    row = check_route(r, _controller(model_path), str(conf["controller"]), conf, avoid, _check_routes(test, r),
+    row = check_route(r, _controller(model_path), conf, avoid, _check_routes(test, r),
                       lambda route: made.append(make_sim(route)) or made[-1])
     sim = made[-1]
     jconf = conf["drive"]["follow"]["junctions"]
@@ -198,7 +197,7 @@ def _teach_repeat(task: tuple[str, str, int, str, list[str]]) -> tuple[str, int,
     junctions, jconf = _junctions(test, sim), drive["follow"]["junctions"]
     out = {}
     for name in localizations:
-        driver = LPAgent(controller, taught.topo, teach) if agent == "lp" else DLMAgent(controller, taught.topo)
+        driver = controller_agent(controller, taught.topo, teach)
         localization = (GroundTruth(taught.lane_s) if name == "ground_truth"
                         else place_localization(name, taught.topo, retrieval, conf))
         episode = run_episode(sim, driver, localization, taught.topo, condition, seed, conf, 0, limit)

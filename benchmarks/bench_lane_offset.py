@@ -30,9 +30,9 @@ import torch
 
 from benchmarks.markdown import add_out_option, markdown_copy
 from topoloc.config import load
-from topoloc.drive.agents import DLMAgent, LPAgent, TeachImages
+from topoloc.drive.agents import DLMAgent, LPAgent, TeachImages, controller_agent
 from topoloc.drive.camera import image_shape
-from topoloc.drive.controller import AGENT_NAMES, load_controller
+from topoloc.drive.controller import AGENT_NAMES
 from topoloc.drive.demonstrations import as_input
 from topoloc.drive.episodes import speed_limit_ahead, teach_controls
 from topoloc.drive.expert import Expert, ExpertSettings
@@ -41,7 +41,7 @@ from topoloc.drive.localization_adapters import GroundTruth
 from topoloc.drive.repeat_routes import repeat_routes
 from topoloc.drive.routes import make_simulator, teach_route
 from topoloc.drive.simulator import RUNNING, Control, Simulator, VehicleSpec, VehicleState
-from topoloc.drive.topo_lp import CONTROLLERS
+from topoloc.drive.topo_lp import load_controller
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.place.topometric_map import TopometricMap
 
@@ -98,10 +98,9 @@ def drive_once(conf: dict, root: Path, agent: str, condition: str) -> tuple[pd.D
     if agent == "path":
         controller: PathOracle | LPAgent | DLMAgent = PathOracle(part.topo, sim, expert)
     else:
-        model = load_controller(root / "drive" / agent / "controller.ckpt", image_shape(conf), "drive.camera",
-                                CONTROLLERS[agent])
+        model = load_controller(root / "drive" / agent / "controller.ckpt", image_shape(conf), "drive.camera")
         teach = TeachImages(sim, part.topo, place["teach_condition"], int(drive["seed"]), bool(place["image"]["color"]))
-        controller = LPAgent(model, part.topo, teach) if agent == "lp" else DLMAgent(model, part.topo)
+        controller = controller_agent(model, part.topo, teach)
     localization, gain = GroundTruth(part.lane_s), float(drive["expert"]["speed_gain"])
     oneway = graph.edges.oneway.to_numpy() != 0
     obs, status, rows = sim.reset(condition, int(drive["seed"])), RUNNING, []

@@ -84,7 +84,8 @@ def straight(straight_road):
     the road."""
     drive = drive_conf(train={"batch_size": 32, "batches_per_epoch": 15, "max_epochs": 6, "max_time_min": None,
                               "accelerator": "cpu", "log_model": False, "log_every_n_steps": 5},
-                       network={"channels": [16, 24, 32], "hidden": 64, "dropout": 0.1},
+                       network={"channels": [16, 24, 32], "hidden": 64, "dropout": 0.1, "dlm_command": "discrete",
+                                "output": {"dlm": "steer", "lp": "waypoints"}},
                        demonstrations={"val_routes": 1})
     return drive, road_simulator(straight_road, drive, 260.0)
 

@@ -9,12 +9,14 @@ import pytest
 import torch
 
 from tests.drive.conftest import BASELINES, ConstantSteer, val_errors, zero_answer_errors
-from topoloc.drive.controller import WAYPOINT_ARCS, load_controller, pure_pursuit, waypoint_targets
-from topoloc.drive.controller_training import build_model, fit, signature_example
+from topoloc.drive.agents import DLMAgent, LPAgent, controller_agent
+from topoloc.drive.controller import WAYPOINT_ARCS, TopoDLM, pure_pursuit, waypoint_targets
+from topoloc.drive.controller_training import build_model, fit, path_noise, signature_example
 from topoloc.drive.demonstrations import Demonstrations
-from topoloc.drive.local_path import map_path, path_plane, raster
+from topoloc.drive.local_path import map_path, move_path, path_plane, raster
+from topoloc.drive.on_policy import controller_input
 from topoloc.drive.simulator import RUNNING, SUCCESS, Control
-from topoloc.drive.topo_lp import TopoLP
+from topoloc.drive.topo_lp import TopoLP, load_controller
 from topoloc.errors import InputError
 from topoloc.training import LoggedModel, log_model
 
@@ -52,7 +54,7 @@ def test_a_controller_from_a_few_hundred_frames_steers_like_the_expert(straight,
     errors, zero = val_errors(model, drive, demos), zero_answer_errors(drive, demos)
     assert learnt(errors, zero, "steer"), (errors, zero)
     assert model(torch_inputs(demos)).shape == (2, 2)
-    load_controller(path, (48, 64, 3))
+    assert type(load_controller(path, (48, 64, 3))) is TopoDLM
     with pytest.raises(InputError, match="trained on 64x48x3 images, not 160x48x3"):
         load_controller(path, (48, 160, 3))
 
@@ -81,8 +83,8 @@ def test_random_weights_fail_the_bound_on_the_trained_controllers(straight, stra
     assert not learnt(errors, zero, "lane_points_m" if output == "waypoints" else "steer"), (errors, zero)
 
 
-def torch_inputs(demos: Demonstrations, agent: str = "dlm"):
-    return torch.from_numpy(signature_example(demos, agent))
+def torch_inputs(demos: Demonstrations, drive: dict | None = None, agent: str = "dlm"):
+    return torch.from_numpy(signature_example(demos, None if drive is None else path_noise(drive, agent)))
 
 
 def test_pure_pursuit_on_the_recorded_lane_points_is_the_experts_steering(straight, straight_demos):
@@ -126,7 +128,7 @@ def test_a_waypoint_controller_is_logged_to_mlflow_with_its_signature(straight, 
     drive, _ = straight
     conf = drive | {"network": {**drive["network"], "output": {"dlm": "waypoints", "lp": "waypoints"}, "path_prior": True}}
     model = build_model(conf, straight_demos, agent).eval()
-    example = signature_example(straight_demos, agent)
+    example = signature_example(straight_demos, path_noise(conf, agent))
     monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
     monkeypatch.chdir(tmp_path)  # the artifacts of an sqlite store go to ./mlruns
     mlflow.set_tracking_uri(f"sqlite:///{tmp_path / 'mlflow.db'}")
@@ -150,10 +152,11 @@ def test_topo_lp_learns_the_same_road_from_its_local_path(straight, straight_dem
     model, _history, metrics = fit(conf, straight_demos, str(tmp_path / "lp.ckpt"), agent="lp")
     errors, zero = val_errors(model, conf, straight_demos, "lp"), zero_answer_errors(drive, straight_demos)
     assert learnt(errors, zero, "steer"), (errors, zero)
-    assert model(torch_inputs(straight_demos, "lp")).shape == (2, 2)
-    loaded = load_controller(tmp_path / "lp.ckpt", (48, 64, 3), cls=TopoLP)
+    assert model(torch_inputs(straight_demos, conf, "lp")).shape == (2, 2)
+    loaded = load_controller(tmp_path / "lp.ckpt", (48, 64, 3))
+    assert isinstance(loaded, TopoLP)  # the checkpoint says which network it holds
     with pytest.raises(InputError, match="not a controller checkpoint"):
-        load_controller(tmp_path / "lp.ckpt", (48, 64, 3))  # a Topo-LP is not a Topo-DLM
+        load_controller(tmp_path / "lp.csv", (48, 64, 3))
     path = path_plane(map_path(sim.route.xy[::4], 0))  # the map of a straight road: straight on everywhere
     status, lateral = _closed_loop(sim, lambda obs: loaded.act(obs.image, obs.speed, path))
     assert status == SUCCESS
@@ -189,7 +192,7 @@ def test_topo_lp_image_dropout_hides_the_image_from_the_head_in_training_only(st
     path = tmp_path / "lp.ckpt"
     torch.save({"state_dict": model.state_dict(), "hyper_parameters": dict(model.hparams),
                 "pytorch-lightning_version": "2.0.0"}, path)
-    assert load_controller(path, cls=TopoLP).hparams.image_dropout == 0.9
+    assert load_controller(path).hparams.image_dropout == 0.9
     with pytest.raises(InputError, match="drive.train.image_dropout"):
         TopoLP(image_dropout=1.0)
     with pytest.raises(InputError, match="place.image"):
@@ -235,8 +238,31 @@ def test_a_path_prior_topo_lp_learns_the_lane_points_from_its_path(straight, str
     model, _history, metrics = fit(conf, straight_demos, str(tmp_path / "lp.ckpt"), agent="lp")
     errors, zero = val_errors(model, conf, straight_demos, "lp"), zero_answer_errors(drive, straight_demos)
     assert learnt(errors, zero, "lane_points_m"), (errors, zero)
-    loaded = load_controller(tmp_path / "lp.ckpt", (48, 64, 3), cls=TopoLP)
+    loaded = load_controller(tmp_path / "lp.ckpt", (48, 64, 3))
     assert loaded.hparams.path_prior and loaded.hparams.image_dropout == 0.3
-    inputs = torch_inputs(straight_demos, "lp")
+    inputs = torch_inputs(straight_demos, conf, "lp")
     with torch.no_grad():
         assert torch.allclose(loaded(inputs), model.eval()(inputs))
+
+
+def test_topo_dlm_told_the_move_learns_the_lane_points_and_is_driven_by_the_paths_move(straight, straight_demos, tmp_path):
+    """drive.network.dlm_command: move: Topo-DLM is Topo-LP's network told the path's move (path_form move), in
+    training, in the closed-loop check's input and at the wheel of a repeat drive; the discrete command keeps the
+    branched network."""
+    drive, sim = straight
+    conf = drive | {"network": {**drive["network"], "dlm_command": "move", "output": {"dlm": "waypoints", "lp": "steer"},
+                                "path_prior": True, "path_frame": "lane"}}
+    assert path_noise(conf, "dlm")["form"] == "move" and path_noise(conf, "lp")["form"] == "path"
+    assert path_noise(drive, "dlm") is None  # the fixture's Topo-DLM: the discrete command
+    model, _history, _metrics = fit(conf, straight_demos, str(tmp_path / "dlm.ckpt"), agent="dlm")
+    errors, zero = val_errors(model, conf, straight_demos, "dlm"), zero_answer_errors(drive, straight_demos)
+    assert learnt(errors, zero, "lane_points_m"), (errors, zero)
+    loaded = load_controller(tmp_path / "dlm.ckpt", (48, 64, 3))
+    assert isinstance(loaded, TopoLP) and loaded.hparams.path_form == "move"
+    told = controller_input(loaded, sim.route, 20.0, sim.route.xy[10], 0.0)
+    assert told.shape == path_plane(move_path(np.zeros((21, 2)))).shape
+    agent = controller_agent(loaded, None)
+    assert isinstance(agent, LPAgent) and agent.form == "move"
+    assert isinstance(controller_agent(build_model(drive, straight_demos, "dlm"), None), DLMAgent)
+    with pytest.raises(InputError, match="drive.network.dlm_command"):
+        build_model(conf | {"network": {**conf["network"], "dlm_command": "turns"}}, straight_demos, "dlm")

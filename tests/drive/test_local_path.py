@@ -1,9 +1,11 @@
 """Topo-LP's local path: the map's path and the demonstrations' lane path give the same image for the same road,
-the vehicle's own offset is not in it, turns bend it the right way, and the training noise moves it."""
+the vehicle's own offset is not in it, turns bend it the right way, and the training noise moves it. Topo-DLM's move:
+one turn, where the path turns, by as much."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from topoloc.drive.local_path import (
     PATH_PX,
@@ -12,6 +14,7 @@ from topoloc.drive.local_path import (
     chain_frame,
     lane_frame_path,
     map_path,
+    move_path,
     path_plane,
     raster,
     vehicle_frame_path,
@@ -103,3 +106,52 @@ def test_vehicle_frame_noise_moves_the_path_as_the_pose_error_does():
     np.testing.assert_allclose(left[:, 1], -0.4, atol=1e-9)
     turned = vehicle_frame_path(lane, 0.0, 0.0, np.radians(5.0))  # turned left: the lane bends away to the right
     assert turned[10, 1] < -0.8
+
+
+def _turning(turns_deg: list[tuple[float, float, float]], start=(0.0, 0.0), heading_deg: float = 0.0) -> np.ndarray:
+    """A path of 20 steps of 1 m from ``start`` that turns ``deg`` evenly from metre ``a`` to metre ``b`` for each
+    ``(a, b, deg)`` of ``turns_deg``."""
+    mid = np.arange(20) + 0.5
+    heading = np.full(20, np.radians(heading_deg))
+    for a, b, deg in turns_deg:
+        heading += np.radians(deg) * np.clip((mid - a) / (b - a), 0.0, 1.0)
+    steps = np.column_stack([np.cos(heading), np.sin(heading)])
+    return np.vstack([start, np.asarray(start) + np.cumsum(steps, axis=0)])
+
+
+def _turned(points: np.ndarray) -> float:
+    d = np.diff(points, axis=0)
+    return float(np.degrees(np.unwrap(np.arctan2(d[:, 1], d[:, 0])))[-1] - np.degrees(np.arctan2(d[0, 1], d[0, 0])))
+
+
+def test_a_path_that_is_one_turn_is_its_own_move():
+    for turn in ([(6.0, 14.0, -90.0)], [(3.0, 17.0, 135.0)], [(0.0, 20.0, 25.0)]):
+        path = _turning(turn, start=(0.0, 0.6), heading_deg=4.0)  # the vehicle 0.6 m right of and 4 deg off the path
+        move = move_path(path)
+        assert np.abs(move - path).max() < 0.05, turn
+
+
+def test_the_move_turns_where_and_as_much_as_the_path_and_keeps_its_start():
+    # a sharp right turn made of two: 40 deg over 5-8 m, 95 deg over 9-13 m (135 deg in all, as the default run's)
+    path = _turning([(5.0, 8.0, -40.0), (9.0, 13.0, -95.0)], start=(0.3, -0.8), heading_deg=-3.0)
+    move = move_path(path)
+    assert _turned(move) == pytest.approx(-135.0, abs=0.5)
+    assert np.allclose(move[:5], path[:5])  # straight ahead up to the turn, from the path's point and heading
+    assert np.hypot(*(move[-1] - path[-1])) < 1.5  # and it comes out where the path does, within a metre or so
+    assert np.abs(move - path).max() > 0.2  # but it is one turn, not the path's two
+
+
+@pytest.mark.parametrize("turns", [[(5.0, 9.0, -30.0), (11.0, 15.0, 30.0)], [(4.0, 12.0, 8.0)]])
+def test_a_path_whose_turns_cancel_or_are_slight_is_a_straight_move(turns):
+    path = _turning(turns, start=(0.0, 0.4), heading_deg=2.0)
+    move = move_path(path)
+    assert abs(_turned(move)) < 1e-9
+    assert np.allclose(move[1] - move[0], path[1] - path[0])  # straight on along the path's first heading
+
+
+def test_the_plane_of_a_move_is_the_plane_of_the_paths_move():
+    path = _turning([(5.0, 8.0, -40.0), (9.0, 13.0, -95.0)])
+    assert np.array_equal(path_plane(path, "move"), path_plane(move_path(path)))
+    assert not np.array_equal(path_plane(path, "move"), path_plane(path))
+    with pytest.raises(ValueError, match="path form"):
+        path_plane(path, "turns")

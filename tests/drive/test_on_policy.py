@@ -18,7 +18,6 @@ from topoloc.config import deep_merge
 from topoloc.drive import simulate_demonstrations, train_controller
 from topoloc.drive.camera import image_shape
 from topoloc.drive.config_slices import controller_slice
-from topoloc.drive.controller import load_controller
 from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.drive_route import build_route
 from topoloc.drive.expert import Expert, ExpertSettings
@@ -33,6 +32,7 @@ from topoloc.drive.on_policy import (
 from topoloc.drive.route_planning import plan_route
 from topoloc.drive.routes import make_simulator, random_drive_route
 from topoloc.drive.simulator import OUTCOMES, SUCCESS, Simulator, VehicleSpec
+from topoloc.drive.topo_lp import load_controller
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.render.rig import StereoRig
@@ -80,7 +80,7 @@ class ExpertController:
 def test_the_expert_takes_over_from_a_controller_heading_off_the_road(road):
     conf, sim, expert = road
     settings = DaggerSettings(rounds=1, epochs=1, takeover_m=1.0, takeover_s=1.0)
-    demo, status, share = drive_on_policy(sim, expert, FullLeft(), "dlm", "clear_noon", 3, conf, ["clear_noon"], 0, settings)
+    demo, status, share = drive_on_policy(sim, expert, FullLeft(), "clear_noon", 3, conf, ["clear_noon"], 0, settings)
     assert status == SUCCESS  # the expert kept the car on the road
     assert 0.2 < share < 0.9  # the controller drove in between, and the car went off its lane every time
     assert np.abs(demo.lateral).max() < 2.0
@@ -92,7 +92,7 @@ def test_the_expert_takes_over_from_a_controller_heading_off_the_road(road):
 def test_a_controller_that_drives_like_the_expert_keeps_the_wheel(road):
     conf, sim, expert = road
     settings = DaggerSettings(rounds=1, epochs=1, takeover_m=1.0, takeover_s=1.0)
-    demo, status, share = drive_on_policy(sim, expert, ExpertController(sim, expert), "dlm", "overcast", 4, conf,
+    demo, status, share = drive_on_policy(sim, expert, ExpertController(sim, expert), "overcast", 4, conf,
                                           ["clear_noon", "overcast"], 7, settings)
     assert status == SUCCESS and share == 0.0
     assert (demo.route == 7).all() and (demo.condition == 1).all()
@@ -126,11 +126,11 @@ def test_the_closed_loop_check_tells_a_driver_from_a_wreck(town):
     graph = RoadGraph.load(town["graph"])
     driver = FollowsTheSimulator(conf)
     make_route = lambda rng: random_drive_route(graph, conf, 150.0, rng)
-    good = closed_loop_check(driver, "dlm", conf, None, make_route, lambda route: driver.make_simulator(str(town["osm"]), graph, route))
+    good = closed_loop_check(driver, conf, None, make_route, lambda route: driver.make_simulator(str(town["osm"]), graph, route))
     assert good["check/routes"] == 3 and good["check/success_rate"] == 1.0 and good["check/share_driven"] == 1.0
     assert {k for k in good if k.startswith("check/success_")} == {"check/success_rate", "check/success_overcast",
                                                                     "check/success_sunset", "check/success_rain"}
-    bad = closed_loop_check(FullLeft(), "dlm", conf, None, make_route,
+    bad = closed_loop_check(FullLeft(), conf, None, make_route,
                             lambda route: make_simulator(str(town["osm"]), graph, route, conf))
     assert bad["check/success_rate"] == 0.0 and bad["check/share_driven"] < 0.5
     assert sum(v for k, v in bad.items() if k in ("check/off_road", "check/wrong_road", "check/reversed")) == 3
@@ -148,7 +148,7 @@ def test_the_closed_loop_check_passes_a_trained_controller_and_no_baseline(strai
     conf = {"drive": deep_merge(drive, {"check": {"routes": 4}, "follow": {"start_lateral_m": 0.5, "start_yaw_deg": 3.0}}),
             "place": {"image": {"color": True}, "repeat_conditions": ["overcast"]}}
     controller = trained_dlm[0].eval() if driver == "trained" else ConstantSteer(BASELINES[driver], drive)
-    metrics = closed_loop_check(controller, "dlm", conf, None, lambda rng: sim.route, lambda route: sim)
+    metrics = closed_loop_check(controller, conf, None, lambda rng: sim.route, lambda route: sim)
     assert metrics["check/routes"] == 4
     assert (metrics["check/success_rate"] >= CHECK_SUCCESS) == (driver == "trained"), metrics
 
@@ -220,10 +220,10 @@ def test_routes_checked_one_by_one_in_any_order_give_the_closed_loop_check(strai
             "place": {"image": {"color": True}, "repeat_conditions": ["overcast", "rain"]}}
     makers = (lambda rng: sim.route, lambda route: sim)
     controller = ConstantSteer(0.0, drive)  # straight on: off the road from some starts, not from others
-    rows = {r: check_route(r, controller, "dlm", conf, None, *makers) for r in (2, 1, 0)}
+    rows = {r: check_route(r, controller, conf, None, *makers) for r in (2, 1, 0)}
     assert [rows[r][0] for r in range(3)] == ["overcast", "rain", "overcast"]
     assert {rows[r][1] for r in range(3)} >= {SUCCESS, "off_road"} and len({rows[r][2] for r in range(3)}) > 1
-    assert closed_loop_check(controller, "dlm", conf, None, *makers) == check_metrics([rows[r] for r in range(3)])
+    assert closed_loop_check(controller, conf, None, *makers) == check_metrics([rows[r] for r in range(3)])
 
 
 def demos_conf() -> dict:

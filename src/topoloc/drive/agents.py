@@ -1,6 +1,7 @@
 """The agents at the wheel of a repeat drive, each told the vertex it is localized at on the map:
-:class:`DLMAgent` (Topo-DLM: the image, the speed and the vertex's command), :class:`LPAgent` (Topo-LP: the image,
-the speed and the local path of the map from the vertex) and :class:`ReplayAgent` (the paper's baseline: the
+:class:`DLMAgent` (the discrete Topo-DLM: the image, the speed and the vertex's command), :class:`LPAgent` (Topo-LP,
+and Topo-DLM told the move: the image, the speed and the local path of the map from the vertex, or its move;
+:func:`controller_agent` picks the one a trained controller needs) and :class:`ReplayAgent` (the paper's baseline: the
 steering the expert used at that vertex in the teach drive, and its target speed there); :class:`ExpertAgent` (the
 expert itself, which sees the true state: the ceiling of the junction benchmark)."""
 
@@ -17,7 +18,7 @@ from topoloc.drive.expert import Expert
 from topoloc.drive.ground_alignment import GroundAligner, PoseTracker
 from topoloc.drive.local_path import aligned_path, chain_frame, map_path, path_plane
 from topoloc.drive.simulator import Control, Simulator
-from topoloc.drive.topo_lp import path_frame
+from topoloc.drive.topo_lp import path_form, path_frame, told_path
 from topoloc.place.topometric_map import TopometricMap
 
 
@@ -54,13 +55,15 @@ class LPAgent:
     """Topo-LP driven by the local path of the localized vertex: in the vertex's frame
     (:func:`topoloc.drive.local_path.map_path`), or, for a Topo-LP trained with ``path_frame: aligned``, in the
     vehicle's frame as a :class:`topoloc.drive.ground_alignment.PoseTracker` on the ``teach`` images estimates it
-    (:func:`topoloc.drive.local_path.aligned_path`)."""
+    (:func:`topoloc.drive.local_path.aligned_path`); told in the controller's ``path_form`` (Topo-DLM told the move:
+    the path's :func:`topoloc.drive.local_path.move_path`)."""
 
     name = "Topo-LP"
 
     def __init__(self, model: Any, topo: TopometricMap, teach: TeachImages | None = None) -> None:
         self.model, self.topo = model, topo
         self._paths: dict[int, NDArray[np.float32]] = {}
+        self.form = path_form(model)
         self.tracker: PoseTracker | None = None
         if path_frame(model) == "aligned":
             if teach is None:
@@ -71,13 +74,20 @@ class LPAgent:
     def act(self, image: NDArray[np.uint8], speed: float, vertex: int) -> Control:
         if self.tracker is not None:
             state = self.tracker.update(image, speed, vertex, self._last)
-            plane = path_plane(aligned_path(self.topo.xy, self.tracker.vertex, state.centre(self.tracker.spec), state.yaw))
+            plane = path_plane(aligned_path(self.topo.xy, self.tracker.vertex, state.centre(self.tracker.spec), state.yaw),
+                               self.form)
         else:
             if vertex not in self._paths:
-                self._paths[vertex] = path_plane(map_path(self.topo.xy, vertex))
+                self._paths[vertex] = path_plane(map_path(self.topo.xy, vertex), self.form)
             plane = self._paths[vertex]
         self._last = Control(*self.model.act(image, speed, plane))
         return self._last
+
+
+def controller_agent(model: Any, topo: TopometricMap, teach: TeachImages | None = None) -> DLMAgent | LPAgent:
+    """The agent that drives trained controller ``model`` on ``topo``: :class:`LPAgent` for a controller told a path
+    (Topo-LP, Topo-DLM told the move), :class:`DLMAgent` for the discrete Topo-DLM."""
+    return LPAgent(model, topo, teach) if told_path(model) else DLMAgent(model, topo)
 
 
 class ReplayAgent:

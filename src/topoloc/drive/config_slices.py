@@ -24,7 +24,7 @@ def controller_slice(config: dict[str, Any], controller: str) -> dict[str, Any]:
     when the controller drives)."""
     drive = config["drive"]
     keys = ("threads", "camera", "vehicle", "expert", "network", "train",
-            *(("path_noise",) if controller == "lp" else ()))
+            *(("path_noise",) if controller == "lp" or drive["network"]["dlm_command"] == "move" else ()))
     if drive["dagger"]["rounds"] or drive["check"]["routes"]:
         conf = drive_slice(config, (*keys, "seed", "episode", "lane", "demonstrations", "dagger", "check"),
                            ("route", "image", "command", "repeat_conditions"))

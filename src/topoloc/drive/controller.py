@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import lightning as L
@@ -198,21 +197,3 @@ class TopoDLM(L.LightningModule):
 
     def configure_optimizers(self) -> Any:
         return torch.optim.Adam(self.parameters(), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay)
-
-
-def load_controller(path: str | Path, image_shape: tuple[int, int, int] | None = None,
-                    where: str = "place.image", cls: type[TopoDLM] = TopoDLM) -> TopoDLM:
-    """The controller (of class ``cls``: Topo-DLM or Topo-LP) of a ``train_controller`` checkpoint, on the CPU, in eval mode.
-
-    InputError naming the file when it is not one, or ``where`` when it was trained on images of another
-    shape than ``image_shape`` (H, W, C).
-    """
-    try:
-        model = cls.load_from_checkpoint(str(path), map_location="cpu")
-    except (OSError, RuntimeError, KeyError, TypeError) as err:
-        raise InputError(path, f"not a controller checkpoint ({err})") from err
-    hp = model.hparams
-    if image_shape is not None and (int(hp.height), int(hp.width), int(hp.in_channels)) != tuple(image_shape):
-        raise InputError(where, f"the controller {path} was trained on {hp.width}x{hp.height}x{hp.in_channels} images, "
-                         f"not {image_shape[1]}x{image_shape[0]}x{image_shape[2]}")
-    return model.eval()

@@ -4,8 +4,9 @@ expert's demonstrations, its DAgger rounds and its closed-loop check (the librar
 Data (:class:`DemoData`): the last ``demonstrations.val_routes`` routes of the demonstrations are for validation
 (``val/loss``, ``val/steer_mae`` pick the checkpoint), the others for training. Every epoch draws
 ``train.batches_per_epoch`` batches of ``train.batch_size`` steps with the commands balanced (each command
-present in the data is drawn equally often: turns are rare), seeded by ``train.seed``. Topo-LP's steps carry the
-local-path image of their lane path with the training noise of ``drive.path_noise`` (:class:`PathSteps`).
+present in the data is drawn equally often: turns are rare), seeded by ``train.seed``. The steps of a controller told
+a path (Topo-LP, and Topo-DLM told the move) carry the local-path plane of their lane path with the training noise of
+``drive.path_noise`` (:class:`PathSteps`).
 
 :func:`fit` trains by :func:`topoloc.training.fit` (the shared Lightning path) and writes the best checkpoint;
 :func:`dagger_rounds` drives, labels and trains on (:mod:`topoloc.drive.on_policy`); :func:`check_controller` is the
@@ -28,7 +29,7 @@ from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.local_path import path_input
 from topoloc.drive.on_policy import DaggerSettings, closed_loop_check, collect
 from topoloc.drive.routes import make_simulator, teach_route
-from topoloc.drive.topo_lp import CONTROLLERS
+from topoloc.drive.topo_lp import CONTROLLERS, TopoLP, controller_class
 from topoloc.drive.turn_routes import TrainingRoutes
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
@@ -54,16 +55,17 @@ def _tensors(demos: Demonstrations, idx: np.ndarray, max_speed: float) -> Tensor
 
 
 class PathSteps(Dataset):
-    """Steps with their local-path image (Topo-LP, :func:`path_input`): the lane path in the lane's frame shifted along
-    it by N(0, ``shift_m``) and turned by N(0, ``yaw_deg``) per draw (the localization error of the paper's
-    training), or in the vehicle's frame (``frame: aligned``) moved by N(0, ``shift_m``) ahead, N(0, ``lateral_m``)
-    aside and turned by N(0, ``yaw_deg``) (the pose tracker's error). With ``fixed`` every step keeps one draw
-    (validation: the same data every epoch, so epochs compare)."""
+    """Steps with their local-path plane (:func:`path_input`, told in ``form``): the lane path in the lane's frame
+    shifted along it by N(0, ``shift_m``) and turned by N(0, ``yaw_deg``) per draw (the localization error of the
+    paper's training), or in the vehicle's frame (``frame: aligned``) moved by N(0, ``shift_m``) ahead, N(0,
+    ``lateral_m``) aside and turned by N(0, ``yaw_deg``) (the pose tracker's error). With ``fixed`` every step keeps
+    one draw (validation: the same data every epoch, so epochs compare)."""
 
     def __init__(self, demos: Demonstrations, idx: np.ndarray, max_speed: float, shift_m: float, yaw_deg: float,
-                 seed: int, fixed: bool = False, lateral_m: float = 0.0, frame: str = "lane") -> None:
+                 seed: int, fixed: bool = False, lateral_m: float = 0.0, frame: str = "lane", form: str = "path") -> None:
         self.demos, self.idx, self.target = demos, idx, _targets(demos, idx, max_speed)
         self.shift_m, self.yaw, self.lateral_m, self.frame = float(shift_m), np.radians(float(yaw_deg)), float(lateral_m), frame
+        self.form = form
         self.seed, self.fixed = int(seed), bool(fixed)
         self.rng = np.random.default_rng([seed, 61])
 
@@ -76,7 +78,7 @@ class PathSteps(Dataset):
         shift = float(rng.normal(0.0, self.shift_m)) if self.shift_m else 0.0
         turn = float(rng.normal(0.0, self.yaw)) if self.yaw else 0.0
         aside = float(rng.normal(0.0, self.lateral_m)) if self.lateral_m and self.frame == "aligned" else 0.0
-        path = path_input(self.demos.path[k], self.frame, shift, aside, turn)
+        path = path_input(self.demos.path[k], self.frame, shift, aside, turn, self.form)
         return (torch.from_numpy(self.demos.images[k]), torch.tensor(self.demos.speed[k]), torch.from_numpy(path),
                 torch.from_numpy(self.target[i]))
 
@@ -118,24 +120,34 @@ class DemoData(L.LightningDataModule):
         noise = self.path_noise
         return PathSteps(self.demos, idx, self.max_speed, noise["shift_m"], noise["yaw_deg"],
                          int(self.train_conf["seed"]) * 2 + stream, fixed=stream == 1,
-                         lateral_m=noise.get("lateral_m", 0.0), frame=noise.get("frame", "lane"))
+                         lateral_m=noise.get("lateral_m", 0.0), frame=noise.get("frame", "lane"),
+                         form=noise.get("form", "path"))
+
+
+def told_path(drive: dict[str, Any], agent: str) -> bool:
+    """Whether controller ``agent`` is told a path (Topo-LP; Topo-DLM with ``drive.network.dlm_command: move``)."""
+    return controller_class(agent, str(drive["network"]["dlm_command"])) is TopoLP
 
 
 def path_noise(drive: dict[str, Any], agent: str) -> dict[str, Any] | None:
-    """What :class:`DemoData` needs of ``drive.path_noise`` and ``drive.network.path_frame`` (None but for Topo-LP)."""
-    if agent != "lp":
+    """What :class:`DemoData` needs of ``drive.path_noise`` and ``drive.network`` to tell controller ``agent`` its path:
+    the noise, the frame and the form (the path, or Topo-DLM's move); None for a controller told a command."""
+    if not told_path(drive, agent):
         return None
-    return {k: float(v) for k, v in drive["path_noise"].items()} | {"frame": str(drive["network"]["path_frame"])}
+    return ({k: float(v) for k, v in drive["path_noise"].items()}
+            | {"frame": str(drive["network"]["path_frame"]), "form": "path" if agent == "lp" else "move"})
 
 
 def build_model(drive: dict[str, Any], demos: Demonstrations, agent: str = "dlm") -> TopoDLM:
     """The controller ``agent`` (``dlm``, ``lp``) of ``drive.network`` with the settings of ``drive.train`` for images
-    shaped like ``demos``'."""
+    shaped like ``demos``' (:func:`topoloc.drive.topo_lp.controller_class` says which network)."""
     net, train = drive["network"], drive["train"]
     h, w, c = demos.images.shape[1:]
+    told = path_noise(drive, agent)
     extra = {"image_dropout": float(train["image_dropout"]), "path_prior": bool(net["path_prior"]),
-             "path_frame": str(net["path_frame"])} if agent == "lp" else {}
-    return CONTROLLERS[agent](**extra, in_channels=c, height=h, width=w, channels=list(net["channels"]),
+             "path_frame": told["frame"], "path_form": told["form"]} if told else {}
+    cls = controller_class(agent, str(net["dlm_command"]))
+    return cls(**extra, in_channels=c, height=h, width=w, channels=list(net["channels"]),
                    hidden=int(net["hidden"]), downsample=int(net["downsample"]),
                    dropout=float(net["dropout"]), max_speed=float(drive["vehicle"]["max_speed_mps"]),
                    speed_gain=float(drive["expert"]["speed_gain"]), lr=float(train["lr"]),
@@ -146,16 +158,17 @@ def build_model(drive: dict[str, Any], demos: Demonstrations, agent: str = "dlm"
                    min_lookahead_m=float(drive["expert"]["min_lookahead_m"]))
 
 
-def signature_example(demos: Demonstrations, agent: str = "dlm", frame: str = "lane") -> np.ndarray:
-    """Two steps as the logged model's input ``(2, C + 2, H, W)`` float32: image, speed plane, command plane (Topo-DLM)
-    or local-path plane (Topo-LP: :func:`topoloc.drive.local_path.path_plane` in its top-left corner)."""
+def signature_example(demos: Demonstrations, told: dict[str, Any] | None = None) -> np.ndarray:
+    """Two steps as the logged model's input ``(2, C + 2, H, W)`` float32: image, speed plane, command plane (the
+    discrete Topo-DLM: ``told`` None) or local-path plane (a controller told a path, ``told`` its
+    :func:`path_noise`: :func:`topoloc.drive.local_path.path_plane` in its top-left corner)."""
     images = demos.images[:2].astype(np.float32).transpose(0, 3, 1, 2)
     planes = np.ones((len(images), 2, *images.shape[2:]), np.float32)
     planes[:, 0] *= demos.speed[:2, None, None]
-    if agent == "lp":
+    if told is not None:
         planes[:, 1] = 0.0
         for i in range(len(images)):
-            path = path_input(demos.path[i], frame)[: images.shape[2], : images.shape[3]]
+            path = path_input(demos.path[i], told["frame"], form=told["form"])[: images.shape[2], : images.shape[3]]
             planes[i, 1, : path.shape[0], : path.shape[1]] = path
     else:
         planes[:, 1] *= demos.command[:2, None, None]
@@ -176,8 +189,7 @@ def fit(drive: dict[str, Any], demos: Demonstrations, model_path: str, log_model
                     noise)
     settings = FitSettings.from_config(train, gradient_clip=1.0, early_stopping_patience=None, sanity_val_steps=0,
                                        fast_dev_run=fast_dev_run)
-    logged = (LoggedModel(signature_example(demos, agent, str(drive["network"]["path_frame"])), free_axes=1)
-              if log_model else None)
+    logged = LoggedModel(signature_example(demos, noise), free_axes=1) if log_model else None
     if init is not None:
         init.train()  # a loaded or acted-with model is in eval mode, and Lightning keeps a module's mode
     result = fit_module(lambda: init if init is not None else build_model(drive, demos, agent), data, settings, model_path,
@@ -199,7 +211,7 @@ def check_controller(conf: dict[str, Any], inputs: dict[str, str], model: TopoDL
     """The closed-loop check of ``model`` on unseen routes of the region of ``inputs`` (``osm``, ``graph``;
     :func:`topoloc.drive.on_policy.closed_loop_check`)."""
     avoid, make_route, make_sim = _route_makers(conf, inputs)
-    return closed_loop_check(model.eval(), str(conf.get("controller", "dlm")), conf, avoid, make_route, make_sim)
+    return closed_loop_check(model.eval(), conf, avoid, make_route, make_sim)
 
 
 def dagger_rounds(conf: dict[str, Any], inputs: dict[str, str], model_path: str, model: TopoDLM, demos: Demonstrations,
@@ -215,7 +227,7 @@ def dagger_rounds(conf: dict[str, Any], inputs: dict[str, str], model_path: str,
     round_drive = {**drive, "train": {**drive["train"], "max_epochs": settings.epochs}}
     histories, facts_all = [history.assign(round=0)], {}
     for k in range(settings.rounds):
-        steps, facts = collect(model, agent, conf, k, avoid, make_route, make_sim)
+        steps, facts = collect(model, conf, k, avoid, make_route, make_sim)
         log.info("DAgger round %d: %s", k + 1, facts)
         facts_all |= {f"dagger/{k + 1}/{key}": value for key, value in facts.items()}
         if len(steps):

@@ -39,15 +39,13 @@ import torch
 from tqdm import tqdm
 
 from topoloc.drive.agents import (
-    DLMAgent,
     ExpertAgent,
-    LPAgent,
     ReplayAgent,
     TeachImages,
+    controller_agent,
     method_name,
 )
 from topoloc.drive.camera import image_shape, place_window
-from topoloc.drive.controller import load_controller
 from topoloc.drive.episodes import run_episode, speed_limit_ahead, teach_controls
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.follow_report import write_follow_report
@@ -56,7 +54,7 @@ from topoloc.drive.localization_adapters import GroundTruth, PlaceLocalization
 from topoloc.drive.movie import write_movie
 from topoloc.drive.repeat_routes import intersections, repeat_routes
 from topoloc.drive.routes import make_simulator, teach_route
-from topoloc.drive.topo_lp import CONTROLLERS
+from topoloc.drive.topo_lp import CONTROLLERS, load_controller
 from topoloc.drive.traces import episode_trace, write_traces
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localizer import PLACE_OBSERVATIONS
@@ -90,8 +88,8 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
     graph = RoadGraph.load(inputs["graph"])
     parts = repeat_routes(teach_route(graph, conf), TopometricMap.load(inputs["map"]), follow["length_m"],
                           int(follow["routes"]))
-    controllers = {a: load_controller(inputs[f"controller_{a}"], image_shape(conf), "drive.camera",
-                                      CONTROLLERS[a]) for a in follow["agents"] if a in CONTROLLERS}
+    controllers = {a: load_controller(inputs[f"controller_{a}"], image_shape(conf), "drive.camera")
+                   for a in follow["agents"] if a in CONTROLLERS}
     retrieval = load_model(inputs["model"]) if place_names else None
     ahead = follow["teach_speed_ahead_m"]
     rows, traces, strips, junction_rows, movies, steps = [], {}, [], [], {}, []
@@ -111,7 +109,8 @@ def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -
         teach_steer, teach_speed = teach_controls(sim, expert, place["teach_condition"], int(drive["seed"]), lane_s)
         limit = None if ahead is None else speed_limit_ahead(teach_speed, lane_s, float(ahead))
         teach = TeachImages(sim, topo, place["teach_condition"], int(drive["seed"]), bool(place["image"]["color"]))
-        agents = {"dlm": partial(DLMAgent, controllers.get("dlm"), topo), "lp": partial(LPAgent, controllers.get("lp"), topo, teach),
+        agents = {"dlm": partial(controller_agent, controllers.get("dlm"), topo, teach),
+                  "lp": partial(controller_agent, controllers.get("lp"), topo, teach),
                   "replay": partial(ReplayAgent, teach_steer, teach_speed, float(drive["expert"]["speed_gain"])),
                   "expert": partial(ExpertAgent, expert, sim)}
         junctions = route_junctions(graph, route, roundabouts, float(jconf["cluster_m"]), float(jconf["around_m"]))

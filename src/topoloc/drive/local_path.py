@@ -17,6 +17,9 @@
 * **Plane** (:func:`path_plane`): what Topo-LP is told, ``PATH_PX + 1`` rows of ``PATH_PX``: the raster on top and,
   in the last row, the path's points 1, 2, ... ``PATH_PX // 2`` m ahead as numbers (x, y in metres, in turn), which a
   Topo-LP with ``path_prior`` reads as its lane points before the image's correction.
+* **The move** (:func:`move_path`, the path form ``move``: what Topo-DLM is told with ``drive.network.dlm_command:
+  move``): the path reduced to one turn, three numbers: where it begins, by how much it turns, over how many metres.
+  Drawn again from the path's first point and heading, it is what the plane then shows.
 """
 
 from __future__ import annotations
@@ -29,6 +32,10 @@ PATH_PX = 32
 PATH_AHEAD_M = 20.0  # as far as the demonstrations record the lane (LOCAL_PATH_M)
 PLANE_POINTS = PATH_PX // 2  # the points 1 .. 16 m ahead fill the plane's last row
 _STEP_M = 1.0
+#: What a controller told a path is told of it (``path_form``): the path itself, or its move (:func:`move_path`).
+PATH_FORMS = ("path", "move")
+#: A path that turns less than this in all (deg) is told as a straight move.
+MOVE_MIN_TURN_DEG = 10.0
 
 
 def _along(points: NDArray[np.float64], arc: NDArray[np.float64], query: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -136,13 +143,39 @@ def vehicle_frame_path(path: NDArray[np.float32], forward_m: float = 0.0, left_m
 
 
 def path_input(path: np.ndarray, frame: str, forward_m: float = 0.0, left_m: float = 0.0,
-               yaw_rad: float = 0.0) -> np.ndarray:
-    """Topo-LP's local-path plane of a recorded lane path (vehicle frame) in ``frame`` (``drive.network.path_frame``):
+               yaw_rad: float = 0.0, form: str = "path") -> np.ndarray:
+    """The local-path plane of a recorded lane path (vehicle frame) in ``frame`` (``drive.network.path_frame``):
     ``lane``, the lane's frame ``forward_m`` along it and turned by ``yaw_rad`` (``left_m`` unused); ``aligned``, the
-    vehicle's frame moved by ``forward_m``, ``left_m`` and turned by ``yaw_rad``."""
+    vehicle's frame moved by ``forward_m``, ``left_m`` and turned by ``yaw_rad``; told in ``form`` (:func:`path_plane`)."""
     if frame == "aligned":
-        return path_plane(vehicle_frame_path(path, forward_m, left_m, yaw_rad))
-    return path_plane(lane_frame_path(path, forward_m, yaw_rad))
+        return path_plane(vehicle_frame_path(path, forward_m, left_m, yaw_rad), form)
+    return path_plane(lane_frame_path(path, forward_m, yaw_rad), form)
+
+
+def move_path(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The move of a path (frame coordinates, metres, every metre from the reference point): the path's total turn
+    ``theta`` drawn as one steady turn over the metres where the path does the middle 80 % of it, widened by an
+    eighth of that span at each end, straight before and after, from the path's first point and first heading and
+    with its step lengths. A path turning less than :data:`MOVE_MIN_TURN_DEG` in all is a straight move; an S-bend
+    whose turns cancel is one too (a move is one turn)."""
+    p = np.asarray(points, float)
+    d = np.diff(p, axis=0)
+    step = np.hypot(*d.T)
+    heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    turned = heading - heading[0]
+    theta = float(turned[-1])
+    if abs(theta) < np.radians(MOVE_MIN_TURN_DEG):
+        move = np.full(len(step), heading[0])
+    else:
+        mid = np.concatenate([[0.0], np.cumsum(step)])[:-1] + 0.5 * step
+        done = np.maximum.accumulate(turned / theta)
+        begin, end = (float(np.interp(q, done, mid)) for q in (0.1, 0.9))
+        widen = max(end - begin, 1e-3) / 8.0
+        move = heading[0] + theta * np.clip((mid - begin + widen) / (end - begin + 2.0 * widen), 0.0, 1.0)
+    out = np.empty_like(p)
+    out[0] = p[0]
+    out[1:] = p[0] + np.cumsum(step[:, None] * np.column_stack([np.cos(move), np.sin(move)]), axis=0)
+    return out
 
 
 def raster(points: NDArray[np.float64]) -> NDArray[np.uint8]:
@@ -156,9 +189,14 @@ def raster(points: NDArray[np.float64]) -> NDArray[np.uint8]:
     return image
 
 
-def path_plane(points: NDArray[np.float64]) -> NDArray[np.float32]:
-    """Topo-LP's input of a path (frame coordinates, metres, every metre from the reference point): its raster in the
-    top ``PATH_PX`` rows, its points 1 .. :data:`PLANE_POINTS` m ahead in the last row (see the module docstring)."""
+def path_plane(points: NDArray[np.float64], form: str = "path") -> NDArray[np.float32]:
+    """The input of a controller told a path (frame coordinates, metres, every metre from the reference point), in
+    ``form`` (:data:`PATH_FORMS`: the path, or its :func:`move_path`): its raster in the top ``PATH_PX`` rows, its
+    points 1 .. :data:`PLANE_POINTS` m ahead in the last row (see the module docstring)."""
+    if form not in PATH_FORMS:
+        raise ValueError(f"path form {form!r} is not one of {', '.join(PATH_FORMS)}")
+    if form == "move":
+        points = move_path(points)
     plane = np.zeros((PATH_PX + 1, PATH_PX), np.float32)
     plane[:PATH_PX] = raster(points)
     plane[PATH_PX] = np.asarray(points, np.float32)[1:PLANE_POINTS + 1].reshape(-1)

@@ -48,7 +48,7 @@ from topoloc.drive.drive_route import DriveRoute
 from topoloc.drive.expert import Expert, ExpertSettings
 from topoloc.drive.local_path import path_input
 from topoloc.drive.simulator import RUNNING, SUCCESS, Control, Simulator, step_vehicle
-from topoloc.drive.topo_lp import path_frame
+from topoloc.drive.topo_lp import path_form, path_frame, told_path
 from topoloc.errors import InputError
 
 
@@ -76,12 +76,11 @@ class DaggerSettings:
         return settings
 
 
-def controller_input(agent: str, route: DriveRoute, s: float, centre: NDArray[np.float64], yaw: float,
-                     frame: str = "lane") -> Any:
-    """What controller ``agent`` is told at arc length ``s``: Topo-DLM the command index, Topo-LP the local-path plane
-    of the lane in ``frame`` (``drive.network.path_frame``), without error."""
-    if agent == "lp":
-        return path_input(local_path(route, s, centre, yaw), frame)
+def controller_input(controller: Any, route: DriveRoute, s: float, centre: NDArray[np.float64], yaw: float) -> Any:
+    """What ``controller`` is told at arc length ``s``, without error: a controller told a path (Topo-LP, Topo-DLM told
+    the move) the local-path plane of the lane in its frame and form, the discrete Topo-DLM the command index."""
+    if told_path(controller):
+        return path_input(local_path(route, s, centre, yaw), path_frame(controller), form=path_form(controller))
     return int(route.command_at(s))
 
 
@@ -95,7 +94,7 @@ def offset_ahead(sim: Simulator, seconds: float) -> float:
     return float(lateral)
 
 
-def drive_on_policy(sim: Simulator, expert: Expert, controller: Any, agent: str, condition: str, seed: int,
+def drive_on_policy(sim: Simulator, expert: Expert, controller: Any, condition: str, seed: int,
                     conf: dict[str, Any], conditions: list[str], route_index: int,
                     settings: DaggerSettings, record: bool = True) -> tuple[Demonstrations, str, float]:
     """One drive of ``sim``'s route by ``controller``, the expert taking over (see the module docstring): its steps
@@ -121,15 +120,14 @@ def drive_on_policy(sim: Simulator, expert: Expert, controller: Any, agent: str,
         if expert_drives:
             control, expert_steps = label, expert_steps + 1
         else:
-            control = Control(*controller.act(image, obs.speed, controller_input(agent, sim.route, sim.s, centre, yaw,
-                                                                             path_frame(controller))))
+            control = Control(*controller.act(image, obs.speed, controller_input(controller, sim.route, sim.s, centre, yaw)))
         obs, status = sim.step(control)
     if status != SUCCESS:
         rows = rows[: max(0, len(rows) - DROP_BEFORE_FAILURE // every)]
     return from_rows(rows, sim, color, conditions, condition, route_index), status, expert_steps / max(sim.t, 1)
 
 
-def collect(controller: Any, agent: str, conf: dict[str, Any], round_index: int, avoid_xy: NDArray[np.float64] | None,
+def collect(controller: Any, conf: dict[str, Any], round_index: int, avoid_xy: NDArray[np.float64] | None,
             make_route: Any, make_simulator: Any) -> tuple[Demonstrations, dict[str, float]]:
     """One round's on-policy steps on every training route of the demonstrations (``conf``: ``drive``, ``place``,
     ``render``; ``make_route`` / ``make_simulator`` as for :func:`topoloc.drive.demonstrations.demonstrate`)."""
@@ -148,8 +146,7 @@ def collect(controller: Any, agent: str, conf: dict[str, Any], round_index: int,
         expert = Expert(route, sim.spec, expert_settings)
         for c in route_conditions(r, len(conditions), demo_conf.get("conditions_per_route")):
             seed = int(np.random.SeedSequence([int(drive["seed"]), 47, round_index, r, c]).generate_state(1)[0])
-            demo, status, share = drive_on_policy(sim, expert, controller, agent, conditions[c], seed, conf, conditions, r,
-                                                  settings)
+            demo, status, share = drive_on_policy(sim, expert, controller, conditions[c], seed, conf, conditions, r, settings)
             outcomes.append(status)
             taken.append(share)
             parts.append(keep_away(demo, avoid_xy, float(demo_conf["min_distance_m"])))
@@ -165,7 +162,7 @@ def collect(controller: Any, agent: str, conf: dict[str, Any], round_index: int,
 CHECK_STREAM = 67
 
 
-def check_route(r: int, controller: Any, agent: str, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None,
+def check_route(r: int, controller: Any, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None,
                 make_route: Any, make_simulator: Any) -> tuple[str, str, float]:
     """Check route ``r`` of :func:`closed_loop_check`, driven by the controller alone: its condition, the drive's
     outcome and the share of the route driven. Depends on ``r`` and the config alone, so routes can be checked in
@@ -178,7 +175,7 @@ def check_route(r: int, controller: Any, agent: str, conf: dict[str, Any], avoid
     seed = int(np.random.SeedSequence([int(drive["seed"]), CHECK_STREAM, r]).generate_state(1)[0])
     alone = DaggerSettings(rounds=0, epochs=1, takeover_m=float("inf"), takeover_s=0.0)
     _, status, _ = drive_on_policy(sim, Expert(route, sim.spec, ExpertSettings.from_conf(drive["expert"])), controller,
-                                   agent, condition, seed, conf, conditions, r, alone, record=False)
+                                   condition, seed, conf, conditions, r, alone, record=False)
     return condition, status, min(1.0, sim.s / max(route.length_m - sim.spec.goal_m, 1e-9))
 
 
@@ -194,10 +191,10 @@ def check_metrics(rows: list[tuple[str, str, float]]) -> dict[str, float]:
     return out
 
 
-def closed_loop_check(controller: Any, agent: str, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None,
+def closed_loop_check(controller: Any, conf: dict[str, Any], avoid_xy: NDArray[np.float64] | None,
                       make_route: Any, make_simulator: Any) -> dict[str, float]:
     """The controller's success on ``drive.check.routes`` routes it never trained on (see the module docstring;
     :func:`check_route`, :func:`check_metrics`)."""
     routes = int(conf["drive"]["check"]["routes"])
-    return check_metrics([check_route(r, controller, agent, conf, avoid_xy, make_route, make_simulator)
+    return check_metrics([check_route(r, controller, conf, avoid_xy, make_route, make_simulator)
                           for r in tqdm(range(routes), desc="closed-loop check", unit="route")])

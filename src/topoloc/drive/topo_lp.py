@@ -13,6 +13,9 @@ With ``path_prior`` (``drive.network.path_prior``, the ``waypoints`` output only
 head gives a correction to the lane points: they are the local path's own points at the waypoint arcs plus the head's
 output, so a path that bends hard turns the wheel hard before the network has learnt anything, and the image says
 how far the vehicle is off the path (its offset from the teach drive, the localization's error along the path).
+With ``path_form: move`` (:data:`topoloc.drive.local_path.PATH_FORMS`) it is told only the path's move
+(:func:`topoloc.drive.local_path.move_path`: one turn, where it begins, how much, over how long): that is Topo-DLM with
+``drive.network.dlm_command: move``, the discrete local move with the turn's geometry (:func:`controller_class`).
 
 ``forward`` takes ``(N, C + 2, H, W)`` like Topo-DLM's, with the local-path plane
 (:func:`topoloc.drive.local_path.path_plane`: the path image, then its points) in the top-left
@@ -22,6 +25,7 @@ how far the vehicle is off the path (its offset from the teach drive, the locali
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -30,7 +34,7 @@ from numpy.typing import NDArray
 from torch import nn
 
 from topoloc.drive.controller import WAYPOINT_ARCS, WAYPOINT_SCALE_M, TopoDLM
-from topoloc.drive.local_path import PATH_PX, PLANE_POINTS
+from topoloc.drive.local_path import PATH_FORMS, PATH_PX, PLANE_POINTS
 from topoloc.errors import InputError
 from topoloc.place.network import eval_mode
 
@@ -42,10 +46,13 @@ PATH_FRAMES = ("lane", "aligned")
 class TopoLP(TopoDLM):
     """The local-path controller of the module docstring (Topo-DLM's encoders, a path encoder, one head)."""
 
-    def __init__(self, image_dropout: float = 0.0, path_prior: bool = False, path_frame: str = "lane", **kwargs: Any) -> None:
+    def __init__(self, image_dropout: float = 0.0, path_prior: bool = False, path_frame: str = "lane",
+                 path_form: str = "path", **kwargs: Any) -> None:
         super().__init__(**kwargs)
         if path_frame not in PATH_FRAMES:
             raise InputError("drive.network.path_frame", f"one of {', '.join(PATH_FRAMES)}, not {path_frame!r}")
+        if path_form not in PATH_FORMS:
+            raise InputError("drive.network.dlm_command", f"told the path as one of {', '.join(PATH_FORMS)}, not {path_form!r}")
         if not 0.0 <= float(image_dropout) < 1.0:
             raise InputError("drive.train.image_dropout", f"must be in [0, 1), got {image_dropout}")
         if path_prior and self.hparams.output != "waypoints":
@@ -115,10 +122,54 @@ class TopoLP(TopoDLM):
         return self._lp_heads(x, speed, condition)
 
 
-#: The controllers ``train_controller`` trains and ``follow_route`` drives, by agent name.
-CONTROLLERS: dict[str, type[TopoDLM]] = {"dlm": TopoDLM, "lp": TopoLP}
+#: The controllers ``train_controller`` trains and ``follow_route`` drives.
+CONTROLLERS = ("dlm", "lp")
+#: What Topo-DLM is told (``drive.network.dlm_command``): the paper's discrete command, or the move with its geometry.
+DLM_COMMANDS = ("discrete", "move")
+
+
+def controller_class(agent: str, dlm_command: str = "discrete") -> type[TopoDLM]:
+    """The network of controller ``agent``: Topo-LP's for ``lp`` and for a Topo-DLM told the move (``dlm_command:
+    move``: Topo-LP's network told the path's move, ``path_form: move``), the branched Topo-DLM for the discrete
+    command."""
+    if agent not in CONTROLLERS:
+        raise InputError("controller", f"unknown controller {agent!r} (one of {', '.join(CONTROLLERS)})")
+    if dlm_command not in DLM_COMMANDS:
+        raise InputError("drive.network.dlm_command", f"one of {', '.join(DLM_COMMANDS)}, not {dlm_command!r}")
+    return TopoLP if agent == "lp" or dlm_command == "move" else TopoDLM
+
+
+def load_controller(path: str | Path, image_shape: tuple[int, int, int] | None = None,
+                    where: str = "place.image") -> TopoDLM:
+    """The controller of a ``train_controller`` checkpoint (a Topo-LP network when its hyperparameters say it was told
+    a path, else the branched Topo-DLM), on the CPU, in eval mode.
+
+    InputError naming the file when it is not one, or ``where`` when it was trained on images of another
+    shape than ``image_shape`` (H, W, C).
+    """
+    try:
+        hparams = torch.load(str(path), map_location="cpu", weights_only=False).get("hyper_parameters", {})
+        cls = TopoLP if {"image_dropout", "path_frame"} & set(hparams) else TopoDLM
+        model = cls.load_from_checkpoint(str(path), map_location="cpu")
+    except (OSError, RuntimeError, KeyError, TypeError, AttributeError) as err:
+        raise InputError(path, f"not a controller checkpoint ({err})") from err
+    hp = model.hparams
+    if image_shape is not None and (int(hp.height), int(hp.width), int(hp.in_channels)) != tuple(image_shape):
+        raise InputError(where, f"the controller {path} was trained on {hp.width}x{hp.height}x{hp.in_channels} images, "
+                         f"not {image_shape[1]}x{image_shape[0]}x{image_shape[2]}")
+    return model.eval()
+
+
+def told_path(model: Any) -> bool:
+    """Whether ``model`` is told a local path (a Topo-LP network: Topo-LP, or Topo-DLM told the move), not a command."""
+    return isinstance(model, TopoLP)
 
 
 def path_frame(model: Any) -> str:
     """The frame of the local path controller ``model`` was trained on (``lane`` for a Topo-DLM and older Topo-LPs)."""
     return str(model.hparams.get("path_frame", "lane")) if hasattr(model, "hparams") else "lane"
+
+
+def path_form(model: Any) -> str:
+    """What of the path ``model`` is told: ``path``, or ``move`` (:func:`topoloc.drive.local_path.move_path`)."""
+    return str(model.hparams.get("path_form", "path")) if hasattr(model, "hparams") else "path"

@@ -20,10 +20,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from topoloc.drive.controller import load_controller
 from topoloc.drive.on_policy import closed_loop_check
 from topoloc.drive.routes import make_simulator, random_drive_route, teach_route
-from topoloc.drive.topo_lp import CONTROLLERS
+from topoloc.drive.topo_lp import load_controller
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.io import write_json, write_text
 from topoloc.report_tables import markdown_table
@@ -32,12 +31,11 @@ from topoloc.report_tables import markdown_table
 def run(conf: dict[str, Any], inputs: dict[str, str], outputs: dict[str, str]) -> dict[str, float]:
     """The closed-loop check of the controller ``inputs['controller']`` (``conf['controller']``, dlm or lp) on unseen
     routes of this region (``graph``, ``osm``), as ``train_controller`` checks on its own region; ``metrics`` (JSON)."""
-    agent = str(conf["controller"])
     torch.set_num_threads(int(conf["drive"]["threads"]))
-    model = load_controller(inputs["controller"], cls=CONTROLLERS[agent])
+    model = load_controller(inputs["controller"])
     graph = RoadGraph.load(inputs["graph"])
     length = float(conf["drive"]["demonstrations"]["route_length_m"])
-    metrics = closed_loop_check(model.eval(), agent, conf, teach_route(graph, conf).xy,
+    metrics = closed_loop_check(model.eval(), conf, teach_route(graph, conf).xy,
                                 lambda rng: random_drive_route(graph, conf, length, rng),
                                 lambda route: make_simulator(inputs.get("osm"), graph, route, conf))
     write_json(outputs["metrics"], metrics)
