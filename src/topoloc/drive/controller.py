@@ -1,4 +1,6 @@
-"""Topo-DLM: the conditional imitation-learning controller of Cai & Wan (Codevilla et al.'s branched network).
+"""Topo-DLM: the conditional imitation-learning controller of Cai & Wan (Codevilla et al.'s branched network), told
+the discrete command (``drive.network.dlm_command: discrete``; told the move, Topo-DLM is
+:class:`topoloc.drive.topo_lp.TopoLP`'s network, :func:`topoloc.drive.topo_lp.controller_class`).
 
 * **Image encoder**: each image averaged over ``downsample`` x ``downsample`` pixels (the lane and the junctions
   ahead stay visible; the convolutions cost that factor squared less), normalised by its local contrast (:func:`topoloc.place.network.local_normalize`:
