@@ -155,7 +155,8 @@ def test_topo_lp_learns_the_same_road_from_its_local_path(straight, straight_dem
     assert model(torch_inputs(straight_demos, conf, "lp")).shape == (2, 2)
     loaded = load_controller(tmp_path / "lp.ckpt", (48, 64, 3))
     assert isinstance(loaded, TopoLP)  # the checkpoint says which network it holds
-    with pytest.raises(InputError, match="not a controller checkpoint"):
+    (tmp_path / "lp.csv").write_text("step,loss\n")
+    with pytest.raises(InputError, match="lp.csv: not a controller checkpoint"):
         load_controller(tmp_path / "lp.csv", (48, 64, 3))
     path = path_plane(map_path(sim.route.xy[::4], 0))  # the map of a straight road: straight on everywhere
     status, lateral = _closed_loop(sim, lambda obs: loaded.act(obs.image, obs.speed, path))

@@ -124,15 +124,11 @@ class DemoData(L.LightningDataModule):
                          form=noise.get("form", "path"))
 
 
-def told_path(drive: dict[str, Any], agent: str) -> bool:
-    """Whether controller ``agent`` is told a path (Topo-LP; Topo-DLM with ``drive.network.dlm_command: move``)."""
-    return controller_class(agent, str(drive["network"]["dlm_command"])) is TopoLP
-
-
 def path_noise(drive: dict[str, Any], agent: str) -> dict[str, Any] | None:
     """What :class:`DemoData` needs of ``drive.path_noise`` and ``drive.network`` to tell controller ``agent`` its path:
-    the noise, the frame and the form (the path, or Topo-DLM's move); None for a controller told a command."""
-    if not told_path(drive, agent):
+    the noise, the frame and the form (the path, or Topo-DLM's move); None for a controller told a command (the
+    discrete Topo-DLM)."""
+    if controller_class(agent, str(drive["network"]["dlm_command"])) is not TopoLP:
         return None
     return ({k: float(v) for k, v in drive["path_noise"].items()}
             | {"frame": str(drive["network"]["path_frame"]), "form": "path" if agent == "lp" else "move"})
@@ -148,14 +144,14 @@ def build_model(drive: dict[str, Any], demos: Demonstrations, agent: str = "dlm"
              "path_frame": told["frame"], "path_form": told["form"]} if told else {}
     cls = controller_class(agent, str(net["dlm_command"]))
     return cls(**extra, in_channels=c, height=h, width=w, channels=list(net["channels"]),
-                   hidden=int(net["hidden"]), downsample=int(net["downsample"]),
-                   dropout=float(net["dropout"]), max_speed=float(drive["vehicle"]["max_speed_mps"]),
-                   speed_gain=float(drive["expert"]["speed_gain"]), lr=float(train["lr"]),
-                   weight_decay=float(train["weight_decay"]), steer_weight=float(train["steer_weight"]),
-                   speed_weight=float(train["speed_weight"]), augment=bool(train["augment"]), seed=int(train["seed"]),
-                   output=str(net["output"][agent]), wheelbase=float(drive["vehicle"]["wheelbase_m"]),
-                   max_steer_deg=float(drive["vehicle"]["max_steer_deg"]), lookahead_s=float(drive["expert"]["lookahead_s"]),
-                   min_lookahead_m=float(drive["expert"]["min_lookahead_m"]))
+               hidden=int(net["hidden"]), downsample=int(net["downsample"]),
+               dropout=float(net["dropout"]), max_speed=float(drive["vehicle"]["max_speed_mps"]),
+               speed_gain=float(drive["expert"]["speed_gain"]), lr=float(train["lr"]),
+               weight_decay=float(train["weight_decay"]), steer_weight=float(train["steer_weight"]),
+               speed_weight=float(train["speed_weight"]), augment=bool(train["augment"]), seed=int(train["seed"]),
+               output=str(net["output"][agent]), wheelbase=float(drive["vehicle"]["wheelbase_m"]),
+               max_steer_deg=float(drive["vehicle"]["max_steer_deg"]), lookahead_s=float(drive["expert"]["lookahead_s"]),
+               min_lookahead_m=float(drive["expert"]["min_lookahead_m"]))
 
 
 def signature_example(demos: Demonstrations, told: dict[str, Any] | None = None) -> np.ndarray:

@@ -15,7 +15,7 @@ output, so a path that bends hard turns the wheel hard before the network has le
 how far the vehicle is off the path (its offset from the teach drive, the localization's error along the path).
 With ``path_form: move`` (:data:`topoloc.drive.local_path.PATH_FORMS`) it is told only the path's move
 (:func:`topoloc.drive.local_path.move_path`: one turn, where it begins, how much, over how long): that is Topo-DLM with
-``drive.network.dlm_command: move``, the discrete local move with the turn's geometry (:func:`controller_class`).
+``drive.network.dlm_command: move``, the local move with the turn's geometry (:func:`controller_class`).
 
 ``forward`` takes ``(N, C + 2, H, W)`` like Topo-DLM's, with the local-path plane
 (:func:`topoloc.drive.local_path.path_plane`: the path image, then its points) in the top-left
@@ -25,6 +25,7 @@ With ``path_form: move`` (:data:`topoloc.drive.local_path.PATH_FORMS`) it is tol
 
 from __future__ import annotations
 
+import pickle
 from pathlib import Path
 from typing import Any
 
@@ -151,7 +152,7 @@ def load_controller(path: str | Path, image_shape: tuple[int, int, int] | None =
         hparams = torch.load(str(path), map_location="cpu", weights_only=False).get("hyper_parameters", {})
         cls = TopoLP if {"image_dropout", "path_frame"} & set(hparams) else TopoDLM
         model = cls.load_from_checkpoint(str(path), map_location="cpu")
-    except (OSError, RuntimeError, KeyError, TypeError, AttributeError) as err:
+    except (OSError, RuntimeError, KeyError, TypeError, AttributeError, pickle.UnpicklingError) as err:
         raise InputError(path, f"not a controller checkpoint ({err})") from err
     hp = model.hparams
     if image_shape is not None and (int(hp.height), int(hp.width), int(hp.in_channels)) != tuple(image_shape):
