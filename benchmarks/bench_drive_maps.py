@@ -181,7 +181,7 @@ def _teach_repeat(task: tuple[str, str, int, str, list[str]]) -> tuple[str, int,
     drive, place = conf["drive"], conf["place"]
     if "retrieval_model" not in _STATE:
         _STATE["retrieval_model"] = load_model(_STATE["retrieval"])
-    retrieval, controller, agent = _STATE["retrieval_model"], _controller(model_path), str(conf["controller"])
+    retrieval, controller = _STATE["retrieval_model"], _controller(model_path)
     avoid, _, make_sim = _map(test)
     route = training_route(r, conf, avoid, _check_routes(test, r), stream=CHECK_STREAM)  # the check's route r
     sim = make_sim(route)

@@ -13,7 +13,8 @@ from topoloc.drive.agents import DLMAgent, LPAgent, controller_agent
 from topoloc.drive.controller import WAYPOINT_ARCS, TopoDLM, pure_pursuit, waypoint_targets
 from topoloc.drive.controller_training import build_model, fit, path_noise, signature_example
 from topoloc.drive.demonstrations import Demonstrations
-from topoloc.drive.local_path import map_path, move_path, path_plane, raster
+from topoloc.drive import on_policy
+from topoloc.drive.local_path import map_path, path_input, path_plane, raster
 from topoloc.drive.on_policy import controller_input
 from topoloc.drive.simulator import RUNNING, SUCCESS, Control
 from topoloc.drive.topo_lp import TopoLP, load_controller
@@ -246,12 +247,13 @@ def test_a_path_prior_topo_lp_learns_the_lane_points_from_its_path(straight, str
         assert torch.allclose(loaded(inputs), model.eval()(inputs))
 
 
-def test_topo_dlm_told_the_move_learns_the_lane_points_and_is_driven_by_the_paths_move(straight, straight_demos, tmp_path):
+def test_topo_dlm_told_the_move_learns_the_lane_points_and_is_driven_by_the_paths_move(straight, straight_demos, tmp_path,
+                                                                                     monkeypatch):
     """drive.network.dlm_command: move: Topo-DLM is Topo-LP's network told the path's move (path_form move), in
     training, in the closed-loop check's input and at the wheel of a repeat drive; the discrete command keeps the
     branched network."""
     drive, sim = straight
-    conf = drive | {"network": {**drive["network"], "dlm_command": "move", "output": {"dlm": "waypoints", "lp": "steer"},
+    conf = drive | {"network": {**drive["network"], "dlm_command": "move", "output": {"dlm": "waypoints", "lp": "waypoints"},
                                 "path_prior": True, "path_frame": "lane"}}
     assert path_noise(conf, "dlm")["form"] == "move" and path_noise(conf, "lp")["form"] == "path"
     assert path_noise(drive, "dlm") is None  # the fixture's Topo-DLM: the discrete command
@@ -260,8 +262,15 @@ def test_topo_dlm_told_the_move_learns_the_lane_points_and_is_driven_by_the_path
     assert learnt(errors, zero, "lane_points_m"), (errors, zero)
     loaded = load_controller(tmp_path / "dlm.ckpt", (48, 64, 3))
     assert isinstance(loaded, TopoLP) and loaded.hparams.path_form == "move"
-    told = controller_input(loaded, sim.route, 20.0, sim.route.xy[10], 0.0)
-    assert told.shape == path_plane(move_path(np.zeros((21, 2)))).shape
+    # the closed-loop check tells each controller its form of the lane ahead: here a right turn made of two
+    heading = np.radians(-40.0 * np.clip(np.arange(20) - 4.0, 0, 3) / 3 - 95.0 * np.clip(np.arange(20) - 8.0, 0, 4) / 4)
+    lane = np.cumsum(np.column_stack([np.cos(heading), np.sin(heading)]), axis=0).astype(np.float32)
+    monkeypatch.setattr(on_policy, "local_path", lambda route, s, centre, yaw: lane)
+    lp = build_model(conf, straight_demos, "lp")
+    told_dlm, told_lp = (controller_input(m, sim.route, 20.0, sim.route.xy[10], 0.0) for m in (loaded, lp))
+    assert np.array_equal(told_dlm, path_input(lane, "lane", form="move"))
+    assert np.array_equal(told_lp, path_input(lane, "lane"))
+    assert not np.array_equal(told_dlm, told_lp)
     agent = controller_agent(loaded, None)
     assert isinstance(agent, LPAgent) and agent.form == "move"
     assert isinstance(controller_agent(build_model(drive, straight_demos, "dlm"), None), DLMAgent)

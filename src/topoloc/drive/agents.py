@@ -25,8 +25,6 @@ from topoloc.place.topometric_map import TopometricMap
 class DLMAgent:
     """Topo-DLM driven by the command of the localized vertex."""
 
-    name = "Topo-DLM"
-
     def __init__(self, model: Any, topo: TopometricMap) -> None:
         self.model, self.topo = model, topo
 
@@ -57,8 +55,6 @@ class LPAgent:
     vehicle's frame as a :class:`topoloc.drive.ground_alignment.PoseTracker` on the ``teach`` images estimates it
     (:func:`topoloc.drive.local_path.aligned_path`); told in the controller's ``path_form`` (Topo-DLM told the move:
     the path's :func:`topoloc.drive.local_path.move_path`)."""
-
-    name = "Topo-LP"
 
     def __init__(self, model: Any, topo: TopometricMap, teach: TeachImages | None = None) -> None:
         self.model, self.topo = model, topo
@@ -93,8 +89,6 @@ def controller_agent(model: Any, topo: TopometricMap, teach: TeachImages | None 
 class ReplayAgent:
     """The teach drive's steering and speed at the localized vertex (the paper's replay baseline)."""
 
-    name = "replay"
-
     def __init__(self, steer: NDArray[np.float64], speed: NDArray[np.float64], gain: float) -> None:
         self.steer, self.speed, self.gain = steer, speed, gain
 
@@ -104,8 +98,6 @@ class ReplayAgent:
 
 class ExpertAgent:
     """The expert driving ``sim``'s route from the vehicle's true state (it ignores the image and the vertex)."""
-
-    name = "expert"
 
     def __init__(self, expert: Expert, sim: Simulator) -> None:
         self.expert, self.sim = expert, sim

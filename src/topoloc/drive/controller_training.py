@@ -29,7 +29,7 @@ from topoloc.drive.demonstrations import Demonstrations
 from topoloc.drive.local_path import path_input
 from topoloc.drive.on_policy import DaggerSettings, closed_loop_check, collect
 from topoloc.drive.routes import make_simulator, teach_route
-from topoloc.drive.topo_lp import CONTROLLERS, TopoLP, controller_class
+from topoloc.drive.topo_lp import TopoLP, controller_class
 from topoloc.drive.turn_routes import TrainingRoutes
 from topoloc.errors import InputError
 from topoloc.graph.road_graph import RoadGraph
@@ -176,8 +176,6 @@ def fit(drive: dict[str, Any], demos: Demonstrations, model_path: str, log_model
         init: TopoDLM | None = None) -> tuple[TopoDLM, pd.DataFrame, dict[str, float]]:
     """Train controller ``agent`` (from the weights of ``init`` when given) on ``demos``; write the best checkpoint to
     ``model_path``; return the model, history and metrics."""
-    if agent not in CONTROLLERS:
-        raise InputError("controller", f"unknown controller {agent!r} (one of {', '.join(CONTROLLERS)})")
     train = drive["train"]
     torch.set_num_threads(int(drive["threads"]))
     noise = path_noise(drive, agent)

@@ -57,7 +57,7 @@ class TopoLP(TopoDLM):
         if not 0.0 <= float(image_dropout) < 1.0:
             raise InputError("drive.train.image_dropout", f"must be in [0, 1), got {image_dropout}")
         if path_prior and self.hparams.output != "waypoints":
-            raise InputError("drive.network.path_prior", "needs the waypoints output (drive.network.output.lp: waypoints), "
+            raise InputError("drive.network.path_prior", "needs the waypoints output (drive.network.output), "
                              f"not {self.hparams.output}")
         if int(self.hparams.height) <= PATH_PX or int(self.hparams.width) < PATH_PX:
             raise InputError("place.image", f"Topo-LP needs images of at least {PATH_PX} x {PATH_PX + 1} pixels for its "
