@@ -18,7 +18,7 @@ REPO = Path(__file__).resolve().parents[1]
 LAYERS = {
     # 0 core: no topoloc imports beyond this layer
     "errors": 0, "io": 0, "geometry": 0, "hashing": 0, "code_digest": 0, "config": 0, "tracking": 0, "training": 0,
-    "stage": 0, "localizer": 0, "report_tables": 0,
+    "stage": 0, "localizer": 0, "report_tables": 0, "fast_inference": 0,
     # 1 map and motion: road graph, OSM, token encoding and segmentation, poses / routes / noise
     "osm": 1, "graph": 1, "encoding": 1, "segmentation": 1, "motion": 1,
     # 2 sensors: rendered images, odometry

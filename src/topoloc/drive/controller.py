@@ -42,6 +42,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from topoloc.errors import InputError
+from topoloc.fast_inference import InferenceCopy
 from topoloc.place.network import augment, eval_mode, local_normalize
 from topoloc.place.topometric_map import COMMANDS
 
@@ -110,6 +111,7 @@ class TopoDLM(L.LightningModule):
                                        for _ in COMMANDS])
         self.speed_head = nn.Sequential(nn.Linear(hidden, 64), nn.ReLU(inplace=True), nn.Linear(64, 1))
         self._generator: torch.Generator | None = None
+        self._inference_encoder = InferenceCopy(self.encoder)
 
     @property
     def n_outputs(self) -> int:
@@ -135,9 +137,15 @@ class TopoDLM(L.LightningModule):
         """Local-contrast normalisation of shrunk float images."""
         return local_normalize(images)
 
-    def _heads(self, images: torch.Tensor, speed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def _features(self, images: torch.Tensor, inference: bool = False) -> torch.Tensor:
+        """The image features (N, hidden) of shrunk float images (0..255); ``inference``: through the encoder's
+        folded copy (:mod:`topoloc.fast_inference`; the closed loop, without gradients)."""
+        encoder = self._inference_encoder if inference else self.encoder
+        return self.image_fc(torch.flatten(encoder(self._normalize(images)), 1))
+
+    def _heads(self, images: torch.Tensor, speed: torch.Tensor, inference: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
         """All branches' outputs (N, commands, 2) and the speed prediction (N,) of shrunk float images (0..255)."""
-        feat = self.image_fc(torch.flatten(self.encoder(self._normalize(images)), 1))
+        feat = self._features(images, inference)
         joint = self.joint(torch.cat([feat, self.speed_fc(speed[:, None] / self.hparams.max_speed)], dim=1))
         return torch.stack([b(joint) for b in self.branches], dim=1), self.speed_head(feat)[:, 0]
 
@@ -155,7 +163,7 @@ class TopoDLM(L.LightningModule):
         eval_mode(self)
         x = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
         v = torch.tensor([float(speed)])
-        out, _ = self._heads(self._shrink(x), v)
+        out, _ = self._heads(self._shrink(x), v, inference=True)
         steer_t, target_t = self._control(out[:, int(command)], v)
         steer, target = float(steer_t[0]), float(target_t[0])
         throttle = self.hparams.speed_gain * (target * self.hparams.max_speed - float(speed))

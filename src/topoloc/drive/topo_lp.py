@@ -71,10 +71,11 @@ class TopoLP(TopoDLM):
         self.branches = nn.ModuleList([nn.Sequential(nn.Linear(hidden, hidden // 2), nn.ReLU(inplace=True),
                                                      nn.Dropout(dropout), nn.Linear(hidden // 2, self.n_outputs))])
 
-    def _lp_heads(self, images: torch.Tensor, speed: torch.Tensor, paths: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def _lp_heads(self, images: torch.Tensor, speed: torch.Tensor, paths: torch.Tensor,
+                  inference: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
         """The head's outputs ``(N, n_outputs)`` and the speed prediction of shrunk images and path planes
-        (N, P + 1, P): :func:`topoloc.drive.local_path.path_plane`."""
-        feat = self.image_fc(torch.flatten(self.encoder(self._normalize(images)), 1))
+        (N, P + 1, P): :func:`topoloc.drive.local_path.path_plane`; ``inference``: :meth:`TopoDLM._features`'."""
+        feat = self._features(images, inference)
         path = self.path_encoder(paths[:, None, :PATH_PX].float() / 255.0)
         seen = feat
         p = float(self.hparams.image_dropout)
@@ -112,7 +113,7 @@ class TopoLP(TopoDLM):
         eval_mode(self)
         x = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
         v = torch.tensor([float(speed)])
-        out, _ = self._lp_heads(self._shrink(x), v, torch.from_numpy(path)[None])
+        out, _ = self._lp_heads(self._shrink(x), v, torch.from_numpy(path)[None], inference=True)
         steer_t, target_t = self._control(out, v)
         steer, target = float(steer_t[0]), float(target_t[0])
         throttle = self.hparams.speed_gain * (target * self.hparams.max_speed - float(speed))

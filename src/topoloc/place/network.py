@@ -33,6 +33,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from topoloc.errors import InputError
+from topoloc.fast_inference import InferenceCopy
 
 
 class BasicBlock(nn.Module):
@@ -167,6 +168,7 @@ class SiameseNet(L.LightningModule):
         elif head_init != "random":
             raise ValueError(f"head_init must be metric or random, got {head_init!r}")
         self._generator: torch.Generator | None = None
+        self._inference_backbone = InferenceCopy(self.backbone)
 
     # -- inference ---------------------------------------------------------------------------------------
     def forward(self, pairs: torch.Tensor) -> torch.Tensor:
@@ -187,7 +189,7 @@ class SiameseNet(L.LightningModule):
         out = []
         for start in range(0, len(images), batch_size):
             batch = torch.from_numpy(np.ascontiguousarray(images[start:start + batch_size])).permute(0, 3, 1, 2)
-            out.append(self.backbone(batch.float().to(self.device)).cpu())
+            out.append(self._inference_backbone(batch.float().to(self.device)).cpu())
         return torch.cat(out).numpy() if out else np.zeros((0, self.hparams.embedding_dim), np.float32)
 
     @torch.no_grad()
