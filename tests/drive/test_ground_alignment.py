@@ -12,7 +12,7 @@ import pytest
 from tests.drive.conftest import lane_map, right_turn
 from topoloc.drive.agents import LPAgent, TeachImages
 from topoloc.drive.expert import Expert, ExpertSettings
-from topoloc.drive.ground_alignment import MATCH_GAIN, GroundAligner, PoseTracker
+from topoloc.drive.ground_alignment import MATCH_GAIN, GroundAligner, PoseTracker, gradients
 from topoloc.drive.local_path import PLANE_POINTS, chain_frame
 from topoloc.drive.simulator import RUNNING, Control, Simulator
 from topoloc.render.rig import StereoRig
@@ -50,6 +50,8 @@ def test_a_view_beside_the_teach_view_is_placed_where_it_was_taken(turn, right_m
             assert abs(np.degrees(found.yaw - truth[2])) < 1.5, (s, prior, found, truth)
             assert abs(found.forward_m - truth[0]) < 1.2, (s, prior, found, truth)  # along a straight road: weak
             assert found.score > 0.5
+            assert aligner.align(teach, gradients(live), prior) == found  # told the image's gradients instead
+            assert aligner.forward_peak(teach, gradients(live), found) == aligner.forward_peak(teach, live, found)
 
 
 class _Recorder:

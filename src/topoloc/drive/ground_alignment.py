@@ -164,11 +164,12 @@ class GroundAligner:
         k = int(np.argmax(score))
         return grid[k], float(score[k])
 
-    def align(self, reference: Reference, live_image: NDArray[np.uint8],
+    def align(self, reference: Reference, live_image: NDArray[np.uint8] | Gradients,
               prior: tuple[float, float, float] | None = None) -> Alignment:
         """The live image's pose against a teach image's :meth:`reference`: a grid from no prior, or around ``prior``
-        (m ahead, m left, rad), then a finer grid around the best."""
-        live = gradients(live_image)
+        (m ahead, m left, rad), then a finer grid around the best (``live_image``: the image, or its
+        :func:`gradients`)."""
+        live = live_image if isinstance(live_image, tuple) else gradients(live_image)
         search = self.search
         if prior is None:
             half = np.array([search.forward_m, search.left_m, np.radians(search.yaw_deg)])
@@ -183,12 +184,13 @@ class GroundAligner:
         best, score = self._best(reference, live, best, spacing, (search.refine_steps,) * 3)
         return Alignment(float(best[0]), float(best[1]), float(best[2]), score)
 
-    def forward_peak(self, reference: Reference, live_image: NDArray[np.uint8], found: Alignment) -> float:
+    def forward_peak(self, reference: Reference, live_image: NDArray[np.uint8] | Gradients, found: Alignment) -> float:
         """How much better ``found`` matches than the same pose :data:`FORWARD_PROBE_M` ahead or behind (near 0 where
-        the road looks alike along it)."""
+        the road looks alike along it; ``live_image`` as :meth:`align` takes it)."""
         best = np.array([found.forward_m, found.left_m, found.yaw])
         probes = best + np.array([[-FORWARD_PROBE_M, 0.0, 0.0], [FORWARD_PROBE_M, 0.0, 0.0]])
-        return found.score - float(self.scores(reference, gradients(live_image), probes).max())
+        live = live_image if isinstance(live_image, tuple) else gradients(live_image)
+        return found.score - float(self.scores(reference, live, probes).max())
 
 
 class PoseTracker:
@@ -303,13 +305,14 @@ class PoseTracker:
             assert self.state is not None
             d = self.state.centre(spec) - origin
             prior = (c * d[0] + s * d[1], -s * d[0] + c * d[1], (self.state.yaw - yaw + np.pi) % (2 * np.pi) - np.pi)
-        found = self.aligner.align(self.reference(self.vertex), image, prior)
+        live = gradients(image)  # once for the match and its forward peak
+        found = self.aligner.align(self.reference(self.vertex), live, prior)
         self.score, self._since = found.score, 0
         if found.score >= self.min_score or self.state is None:
             trusted = found.score >= self.min_score
             forward, left, turn = (found.forward_m, found.left_m, found.yaw) if trusted else (0.0, 0.0, 0.0)
             if prior is not None and (np.isinf(self.min_forward_peak) or self.aligner.forward_peak(
-                    self.reference(self.vertex), image, found) < self.min_forward_peak):
+                    self.reference(self.vertex), live, found) < self.min_forward_peak):
                 forward = prior[0]  # a road that looks alike a little further on: the model's along-track estimate
             if prior is not None:
                 left = prior[1] + MATCH_GAIN * (left - prior[1])
