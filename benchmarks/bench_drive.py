@@ -104,6 +104,8 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3, help="times each part is timed; the median is reported")
     add_out_option(parser, "bench_drive")
     args = parser.parse_args()
+    if args.rounds < 1:
+        parser.error(f"--rounds must be at least 1, not {args.rounds}")
     with markdown_copy(args.out):
         config = load(Path(args.configfile))
         conf = {"drive": config["drive"], "place": config["place"], "render": config["render"]}
