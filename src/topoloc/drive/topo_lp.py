@@ -74,7 +74,7 @@ class TopoLP(TopoDLM):
     def _lp_heads(self, images: torch.Tensor, speed: torch.Tensor, paths: torch.Tensor,
                   inference: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
         """The head's outputs ``(N, n_outputs)`` and the speed prediction of shrunk images and path planes
-        (N, P + 1, P): :func:`topoloc.drive.local_path.path_plane`; ``inference``: :meth:`TopoDLM._features`'."""
+        (N, P + 1, P): :func:`topoloc.drive.local_path.path_plane`; ``inference`` as :meth:`TopoDLM._features` takes it."""
         feat = self._features(images, inference)
         path = self.path_encoder(paths[:, None, :PATH_PX].float() / 255.0)
         seen = feat
