@@ -89,8 +89,13 @@ def test_the_place_network_and_the_controller_act_through_their_copies_as_throug
     images = np.random.default_rng(0).integers(0, 255, (3, 24, 32, 3)).astype(np.uint8)
     with torch.no_grad():
         direct = model.backbone(torch.from_numpy(images).permute(0, 3, 1, 2).float()).numpy()
+    assert model._inference_backbone._copy is None
     assert np.allclose(model.embed(images), direct, atol=1e-4)
+    assert model._inference_backbone._copy is not None  # embed went through the copy
     controller = _with_batch_statistics(TopoDLM(height=24, width=32, channels=(8, 16), hidden=32, augment=False), seed=5)
     shrunk = torch.rand(2, 3, 24, 32) * 255
     with torch.no_grad():
         assert torch.allclose(controller._features(shrunk, inference=True), controller._features(shrunk), atol=1e-4)
+    fresh = _with_batch_statistics(TopoDLM(height=24, width=32, channels=(8, 16), hidden=32, augment=False), seed=5)
+    fresh.act(images[0], 3.0, 0)
+    assert fresh._inference_encoder._copy is not None  # the closed loop's call goes through the copy
