@@ -18,8 +18,8 @@ BENCHMARKS = sorted(p.stem for p in (REPO / "benchmarks").glob("bench_*.py"))
 
 
 def test_the_benchmarks_are_there():
-    assert len(BENCHMARKS) == 17 and {"bench_odometry", "bench_real_drives", "bench_viewer", "bench_map_errors",
-                                      "bench_filter_recovery", "bench_lane_offset", "bench_drive_maps"} <= set(BENCHMARKS)
+    assert len(BENCHMARKS) == 18 and {"bench_odometry", "bench_real_drives", "bench_viewer", "bench_map_errors",
+                                      "bench_filter_recovery", "bench_lane_offset", "bench_drive_maps", "bench_recalibration"} <= set(BENCHMARKS)
 
 
 @pytest.mark.parametrize("name", BENCHMARKS)

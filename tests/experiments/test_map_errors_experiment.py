@@ -109,3 +109,28 @@ def test_unknown_map_is_one_clear_error(tmp_path):
     conf = _conf("none", maps=["atlantis"])
     with pytest.raises(InputError, match="experiments.map_errors.maps"):
         map_error_starts.load_base("atlantis", conf, {}, tmp_path)
+
+
+def test_every_answer_of_a_job_for_a_recalibration(tmp_path):
+    """``localize_error(..., answers=[])`` hands every answer over (its confidence and whether it is right), one frame
+    per start that agrees with the start's bin sums; ``benchmarks.bench_recalibration`` fits on them."""
+    conf = _conf("none", maps=["dual_grid"], levels=["medium"], drives=0, localizers=["metric"], start_every_m=1000.0)
+    answers: list[pd.DataFrame] = []
+    frame, _ = map_error_starts.localize_error(conf, "none", ["none"], {}, tmp_path, progress=False, answers=answers)
+    assert len(answers) == len(frame) > 0
+    for (_, row), given in zip(frame.iterrows(), answers):
+        assert given.start.iloc[0] == row.start and set(given.localizer) == {"metric"} and set(given["map"]) == {"dual_grid"}
+        sums = calibration.bin_sums(given.confidence, given.right)
+        assert all(sums[k] == pytest.approx(row[k]) for k in calibration.COLUMNS)
+    fitted = calibration.fit_logit_calibration(pd.concat(answers).confidence, pd.concat(answers).right)
+    assert fitted.scale > 0
+
+
+def test_the_recalibration_benchmark_fits_and_checks(tmp_path):
+    from benchmarks import bench_recalibration
+
+    out = tmp_path / "recalibration.md"
+    assert bench_recalibration.main(["--results", str(tmp_path / "none"), "--maps", "dual_grid", "--errors", "none",
+                                     "--start-every", "1000", "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "`localization.metric.confidence_scale: " in text and "| check (1) | none" in text and "| fit (0)   | none" in text

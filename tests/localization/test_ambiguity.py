@@ -88,3 +88,28 @@ def test_merge_places_adds_up_places_within_merge_m():
     cols = track.place_columns(2)
     assert cols["place1_state"].tolist() == [4, -1] and cols["place1_prob"][0] == 0.7 and cols["place1_y"][0] == 2.0
     assert cols["place2_state"].tolist() == [-1, -1] and np.isnan(cols["place2_prob"]).all()
+
+
+def test_the_metric_filters_recalibration_changes_the_confidences_only(mirror):
+    """``confidence_scale`` and ``confidence_shift`` map every place's probability, the answer's confidence with it,
+    through :class:`~topoloc.localization.calibration.LogitCalibration`; the answers and the places' order stay."""
+    from topoloc.localization.calibration import LogitCalibration
+
+    _, road, conf, odometry, _, _ = mirror
+    cooled = {**conf, "localization": {**conf["localization"], "metric": {
+        **conf["localization"]["metric"], "confidence_scale": 0.6, "confidence_shift": -0.3}}}
+    calibrate = LogitCalibration(0.6, -0.3)
+    starts = np.array([0, 200])
+    tracks = {}
+    for label, c in (("raw", conf), ("cooled", cooled)):
+        localizer = make("metric")
+        observations = localizer.observe(odometry, road, c)
+        localizer.reset(road, c)
+        tracks[label] = [localizer.run(observations.items)] + [t for _, _, t in localizer.run_starts(odometry, road, c, starts)]
+    for raw, cooled_track in zip(tracks["raw"], tracks["cooled"]):
+        assert np.array_equal(raw.state, cooled_track.state)
+        assert np.allclose(cooled_track.confidence, calibrate.array(raw.confidence))
+        assert (cooled_track.confidence[raw.confidence > 0.5] < raw.confidence[raw.confidence > 0.5]).all()
+        for before, after in zip(raw.places, cooled_track.places):
+            assert [p.state for p in before] == [p.state for p in after]
+            assert [p.probability for p in after] == pytest.approx([calibrate(p.probability) for p in before])

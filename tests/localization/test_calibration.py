@@ -81,3 +81,30 @@ def test_the_evaluation_scores_calibration_with_the_judge():
     assert summary.loc[("all", "x"), "ece"] == pytest.approx(0.45) and np.isnan(summary.loc[("all", "oracle"), "ece"])
     lines = reliability_lines(table)
     assert lines[0] == "## Calibration" and lines[-1].startswith("| x | 0.450 |") and lines[-1].endswith("| 0.50 (30) |")
+
+
+def test_logit_calibration_is_monotone_keeps_the_ends_and_the_identity():
+    c = np.array([0.0, 1e-9, 0.2, 0.5, 0.9, 0.99, 1.0])
+    assert np.array_equal(calibration.LogitCalibration().array(c), c)
+    cool = calibration.LogitCalibration(0.8, -0.1)
+    out = cool.array(c)
+    assert out[0] == 0.0 and out[-1] == 1.0 and (np.diff(out) > 0).all()
+    assert out[4] < 0.9 and out[5] < 0.99  # a temperature above 1 pulls confidences towards a half
+    assert [cool(float(v)) for v in c] == pytest.approx(out.tolist())
+    assert cool(0.5) == pytest.approx(1.0 / (1.0 + np.exp(0.1)))  # logit 0 -> the shift alone
+    with pytest.raises(ValueError, match="scale"):
+        calibration.LogitCalibration(0.0)
+
+
+def test_a_fitted_logit_calibration_undoes_an_overconfidence_it_was_fitted_on():
+    rng = np.random.default_rng(1)
+    truth = rng.uniform(-4, 4, 200_000)  # the true log-odds of each answer being right
+    right = rng.uniform(size=truth.size) < 1.0 / (1.0 + np.exp(-truth))
+    stated = 1.0 / (1.0 + np.exp(-(1.5 * truth + 0.3)))  # overconfident by a factor of 1.5 on the log-odds, and biased
+    fitted = calibration.fit_logit_calibration(stated, right)
+    assert fitted.scale == pytest.approx(1 / 1.5, rel=0.03) and fitted.shift == pytest.approx(-0.3 / 1.5, abs=0.03)
+    before = calibration.expected_calibration_error(stated, right)
+    after = calibration.expected_calibration_error(fitted.array(stated), right)
+    assert before > 0.03 and after < 0.01
+    honest = calibration.fit_logit_calibration(1.0 / (1.0 + np.exp(-truth)), right)
+    assert honest.scale == pytest.approx(1.0, abs=0.03) and honest.shift == pytest.approx(0.0, abs=0.03)

@@ -62,13 +62,21 @@ def with_confirmed(group: pd.DataFrame, confirm_m: float) -> dict[str, float]:
 
 
 def start_rows(judge: Judge, truth: DriveTruth, runs: list, limits: dict[int, float], ev: dict[str, Any],
-               localizer: str, **columns: Any) -> list[dict[str, Any]]:
+               localizer: str, answers: list[pd.DataFrame] | None = None, **columns: Any) -> list[dict[str, Any]]:
     """One row per start of ``runs`` (``run_starts``' (start, observations, track)) of ``localizer``: the fixed
-    ``columns``, the start, its scores, the oracle's limit and the ratio to it."""
+    ``columns``, the start, its scores, the oracle's limit and the ratio to it. With ``answers``, each start's
+    answers are appended to it too: one frame per start, a row per answer (its ``confidence`` and whether it is
+    ``right``), with the fixed ``columns`` and the start (the input of a recalibration,
+    :func:`topoloc.localization.calibration.fit_logit_calibration`)."""
     rows = []
     for start, observations, track in runs:
         m = score_start(judge, truth, start, observations.frame, track.state, track.confidence, track.xy,
                         float(ev["confirm_m"]), float(ev["sure"]))
+        if answers is not None and len(observations.frame):
+            frame = np.asarray(observations.frame, np.int64)
+            right = judge.right(track.state, truth.edge[frame], truth.xy[frame])
+            answers.append(pd.DataFrame({**columns, "localizer": localizer, "start": start,
+                                         "confidence": np.asarray(track.confidence, float), "right": right}))
         limit = limits[start]
         ratio = (m["localized_m"] / limit if np.isfinite(m["localized_m"]) else np.inf) if np.isfinite(limit) else np.nan
         rows.append({**columns, "start": start, "start_m": float(truth.driven[start]), "localizer": localizer, **m,

@@ -91,9 +91,10 @@ def _oracle_edges(edge: np.ndarray) -> np.ndarray:
 
 
 def localize_error(conf: dict[str, Any], error: str, levels: list[str], inputs: dict[str, str], scratch: Path,
-                   progress: bool = True) -> tuple[pd.DataFrame, dict[str, float]]:
+                   progress: bool = True, answers: list[pd.DataFrame] | None = None) -> tuple[pd.DataFrame, dict[str, float]]:
     """Every base map's drives for ``error`` (``none``: the map equal to the truth) at each of ``levels``: the
-    per-start table and each localizer's CPU seconds."""
+    per-start table and each localizer's CPU seconds (with ``answers``, every answer too:
+    :func:`~topoloc.experiments.many_starts.start_rows`)."""
     exp = conf["map_errors"]
     loc_conf = {k: conf[k] for k in ("localization", "segmentation", "encoding")}
     ev = conf["localization"]["evaluate"]
@@ -128,7 +129,7 @@ def localize_error(conf: dict[str, Any], error: str, levels: list[str], inputs: 
                     began = time.process_time()
                     runs = localizer.run_starts(sim.odometry, road, loc_conf, starts)
                     seconds[name] += time.process_time() - began
-                    rows += start_rows(judge, truth, runs, limits, ev, name, map=map_name, error=error, level=level,
+                    rows += start_rows(judge, truth, runs, limits, ev, name, answers, map=map_name, error=error, level=level,
                                        pattern=pattern, drive=name_, off_map=float((edge < 0).mean()))
                 if progress:
                     log.info("%s: %.0f m, %d starts, %.1f %% off-map", name_, sim.length_m, len(starts),

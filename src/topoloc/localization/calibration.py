@@ -18,6 +18,7 @@ starts (summed) equal those of all their answers pooled.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -83,3 +84,52 @@ def ece(rows: pd.DataFrame | dict[str, float], bins: int = BINS) -> float:
 def expected_calibration_error(confidence: ArrayLike, right: ArrayLike, bins: int = BINS) -> float:
     """ECE of answers given directly (confidence per answer and whether it is right)."""
     return ece(bin_sums(confidence, right, bins), bins)
+
+
+class LogitCalibration:
+    """A localizer's confidence recalibrated on the log-odds, ``logit(c') = scale logit(c) + shift`` (Platt scaling;
+    ``shift`` 0 is Guo et al.'s temperature ``1 / scale``). Monotone for ``scale`` > 0, so the ranking of places and
+    every answer stay as they were; ``scale`` 1 and ``shift`` 0 leave the confidence as it is."""
+
+    def __init__(self, scale: float = 1.0, shift: float = 0.0) -> None:
+        if not scale > 0:
+            raise ValueError(f"confidence scale must be > 0, got {scale}")
+        self.scale, self.shift = float(scale), float(shift)
+        self.identity = self.scale == 1.0 and self.shift == 0.0
+        self._odds = math.exp(self.shift)
+
+    def __call__(self, confidence: float) -> float:
+        """One confidence, recalibrated (0 and 1 stay 0 and 1)."""
+        if self.identity or not 0.0 < confidence < 1.0:
+            return confidence
+        num = self._odds * confidence ** self.scale  # e^shift c^scale / (e^shift c^scale + (1 - c)^scale)
+        return num / (num + (1.0 - confidence) ** self.scale)
+
+    def array(self, confidence: ArrayLike) -> NDArray[np.float64]:
+        """Many confidences, recalibrated."""
+        c = np.asarray(confidence, float)
+        if self.identity:
+            return c.copy()
+        with np.errstate(divide="ignore"):
+            num = self._odds * np.power(c, self.scale)
+            out = num / (num + np.power(1.0 - c, self.scale))
+        return np.where((c > 0) & (c < 1), out, np.clip(c, 0.0, 1.0))
+
+
+def fit_logit_calibration(confidence: ArrayLike, right: ArrayLike, iterations: int = 50) -> LogitCalibration:
+    """The :class:`LogitCalibration` of largest likelihood of the judgements ``right`` given the ``confidence`` of each
+    answer (logistic regression on the log-odds, Newton's method); confidences are clipped to [1e-6, 1 - 1e-6]."""
+    c = np.clip(np.asarray(confidence, float), 1e-6, 1.0 - 1e-6)
+    y = np.asarray(right, float)
+    if c.shape != y.shape or not len(c):
+        raise ValueError(f"{c.shape} confidences for {y.shape} judgements")
+    x = np.stack([np.log(c / (1.0 - c)), np.ones_like(c)], axis=1)
+    w = np.array([1.0, 0.0])
+    for _ in range(iterations):
+        p = 1.0 / (1.0 + np.exp(-(x @ w)))
+        hessian = (x * (p * (1.0 - p))[:, None]).T @ x + 1e-9 * np.eye(2)
+        step = np.linalg.solve(hessian, x.T @ (y - p))
+        w += step
+        if np.abs(step).max() < 1e-10:
+            break
+    return LogitCalibration(float(w[0]), float(w[1]))

@@ -8,13 +8,14 @@ from typing import Any
 
 import numpy as np
 
+from topoloc.localization.calibration import LogitCalibration
 from topoloc.localization.connectivity import DirectedEdges, directed_edges
 from topoloc.localization.metric.city_filter import CityFilter, coarse_settings, uses_coarse
 from topoloc.localization.metric.map_model import MetricModel, MetricSettings
 from topoloc.localization.metric.odometry_steps import odometry_steps
 from topoloc.localization.metric.restart import RestartingFilter
 from topoloc.localization.roadmap import Observations, RoadLocalizer, RoadMap
-from topoloc.localizer import Answer, Track, register
+from topoloc.localizer import Answer, Place, Track, register
 from topoloc.motion.poses import Odometry
 
 
@@ -46,6 +47,8 @@ class MetricLocalizer(RoadLocalizer):
         self.restart_confidence = float(conf["localization"]["metric"]["restart_confidence"])
         self.restart_margin = float(conf["localization"]["metric"]["restart_margin"])
         self.restart_hold_m = float(conf["localization"]["metric"]["restart_hold_m"])
+        self.calibrate = LogitCalibration(conf["localization"]["metric"]["confidence_scale"],
+                                          conf["localization"]["metric"]["confidence_shift"])
         self.filter = self._bank(1)
         self.past_m = 0.0
 
@@ -75,7 +78,13 @@ class MetricLocalizer(RoadLocalizer):
     def answer(self) -> Answer:
         """The top place of the belief, with the other top places (``localization.places``), at the frame answered
         at."""
-        return Answer.of_places(self.filter.top_places(self.top, self.merge_m, shift_m=self.past_m))
+        return Answer.of_places(self._calibrated(self.filter.top_places(self.top, self.merge_m, shift_m=self.past_m)))
+
+    def _calibrated(self, places: list[Place]) -> list[Place]:
+        """``places`` with their probabilities recalibrated (``confidence_scale``, ``confidence_shift``)."""
+        if self.calibrate.identity:
+            return places
+        return [Place(p.state, self.calibrate(p.probability), p.xy) for p in places]
 
     def run_starts(self, odometry: Odometry, map: RoadMap, conf: dict[str, Any],
                    starts: np.ndarray) -> list[tuple[int, Observations, Track]]:
@@ -96,7 +105,7 @@ class MetricLocalizer(RoadLocalizer):
             bank.update(int(steps.direction[j]), float(steps.yaw[j]))
             started = np.flatnonzero(first <= j)
             for b, places in zip(started.tolist(), bank.places(self.top, self.merge_m, started, float(steps.past_m[j]))):
-                answers[b].append(Answer.of_places(places))
+                answers[b].append(Answer.of_places(self._calibrated(places)))
         out = []
         for b, start in enumerate(starts):
             cells = bank.path(b)
