@@ -71,6 +71,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--configfile", default=str(REPO / "config" / "config.yaml"))
     add_out_option(parser, "bench_recalibration")
     args = parser.parse_args(argv)
+    if not args.fit_seeds.strip():
+        parser.error("--fit-seeds: at least one seed to fit on")
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     graph = Path(args.results) / "graph" / "graph.graphml"
     inputs = {"graph": str(graph)} if graph.is_file() else {}
@@ -98,9 +100,9 @@ def main(argv: list[str] | None = None) -> int:
             for level, group in frame.groupby("level", sort=False):
                 raw = group.confidence.to_numpy(float)
                 for label, calibrate in (("raw", None), ("configured", configured), ("fitted", fitted)):
-                    conf_ = raw if calibrate is None else calibrate.array(raw)
+                    shown = raw if calibrate is None else calibrate.array(raw)
                     rows.append({"seeds": f"{name} ({','.join(map(str, sets[name]))})", "level": level,
-                                 "confidence": label, "answers": len(group), **figures(group, conf_, sure)})
+                                 "confidence": label, "answers": len(group), **figures(group, shown, sure)})
         print(pd.DataFrame(rows).to_markdown(index=False, floatfmt=".4f"))
         print(f"\nwall {time.time() - began:.0f} s")
     return 0

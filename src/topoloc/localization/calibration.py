@@ -11,6 +11,9 @@ the *reliability diagram*. The *expected calibration error* is the mean over ans
 0 for a perfectly calibrated localizer, large for an over- or under-confident one (Guo et al., "On
 calibration of modern neural networks", ICML 2017).
 
+A localizer's confidence can be recalibrated (:class:`LogitCalibration`, fitted by :func:`fit_logit_calibration`):
+a monotone map on the log-odds, which changes no answer, only how sure it is said to be.
+
 The bin sums are additive: :func:`bin_sums` of one start's answers are columns of that start's row
 (``cal_n_<b>``, ``cal_conf_<b>``, ``cal_right_<b>``), and :func:`reliability` / :func:`ece` of the rows of many
 starts (summed) equal those of all their answers pooled.
