@@ -53,8 +53,9 @@ def draws(seeds: str) -> list[int]:
 
 def per_draw(frame: pd.DataFrame, confirm_m: float) -> pd.DataFrame:
     """:func:`level_table` of each draw (column ``draw``), one after the other: how far one draw's figures carry."""
-    return pd.concat([level_table(group, confirm_m).assign(draw=seed) for seed, group in frame.groupby("draw", sort=False)],
-                     ignore_index=True).pipe(lambda t: t[["draw", *[c for c in t.columns if c != "draw"]]])
+    tables = [level_table(group, confirm_m).assign(draw=seed) for seed, group in frame.groupby("draw", sort=False)]
+    out = pd.concat(tables, ignore_index=True)
+    return out[["draw", *[c for c in out.columns if c != "draw"]]]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -119,7 +120,8 @@ def main(argv: list[str] | None = None) -> int:
         print(pooled.to_markdown(index=False, floatfmt=".3f"))
         if len(seeds) > 1:
             print("\n## Pooled per level, each draw\n")
-            print(per_draw(frame, float(conf["localization"]["evaluate"]["confirm_m"])).to_markdown(index=False, floatfmt=".3f"))
+            each = per_draw(frame, float(conf["localization"]["evaluate"]["confirm_m"]))
+            print(each.to_markdown(index=False, floatfmt=".3f"))
         print("\n## Per error type and map\n")
         print(table(frame, ["error", "map", "localizer"]).to_markdown(index=False, floatfmt=".3f"))
         print("\n## Per drive pattern\n")

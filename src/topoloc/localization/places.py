@@ -4,9 +4,9 @@ metric filter (:mod:`topoloc.localization.metric`) and of the token HMM (:mod:`t
 
 A place is a road (undirected edge): its probability is the belief's mass on the road's cells (both directions),
 its position the cell of the road's most probable entry (a filter split into scale classes holds a cell once
-per class: the best class's cell, not the cell of most mass summed over the classes). Of every filter the :data:`CANDIDATES` times ``k`` most probable roads
-are ranked, places within ``merge_m`` metres of a more probable one merged into it
-(:func:`topoloc.localizer.merge_places`).
+per class: the best class's cell, not the cell of most mass summed over the classes). Of every filter the
+:data:`CANDIDATES` times ``k`` most probable roads are ranked, places within ``merge_m`` metres of a more probable one
+merged into it (:func:`topoloc.localizer.merge_places`).
 """
 
 from __future__ import annotations
