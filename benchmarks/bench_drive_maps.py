@@ -53,7 +53,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from benchmarks.markdown import add_out_option, markdown_copy
+from benchmarks.markdown import add_out_option, markdown_copy, seed_list
 from topoloc.config import deep_merge, dotted_overrides, load
 from topoloc.drive.agents import TeachImages, controller_agent
 from topoloc.drive.controller_training import fit
@@ -310,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--configfile", action="append", default=None, help="merged in order (config/config.yaml)")
     parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE", help="override config keys")
     parser.add_argument("--agent", default="lp", choices=sorted(CONTROLLERS))
-    parser.add_argument("--seeds", default="0,1,2")
+    parser.add_argument("--seeds", type=seed_list, default=[0, 1, 2])
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--train-workers", type=int, default=1, help="trainings at once (processes sharing the GPU)")
     parser.add_argument("--train-only", action="store_true", help="record and train, do not check")
@@ -349,7 +349,7 @@ def main(argv: list[str] | None = None) -> int:
         if not 0 < low <= high:
             parser.error(f"--route-length-m: 0 < MIN <= MAX (got {args.route_length_m!r})")
         check_length_m = (low, high)
-    seeds = [int(s) for s in args.seeds.split(",")]
+    seeds = args.seeds
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
 

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks.markdown import add_out_option, markdown_copy
+from benchmarks.markdown import add_out_option, markdown_copy, seed_list
 from topoloc.config import dotted_overrides, load
 from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization import calibration
@@ -215,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--graph", default="results/helsinki/graph/graph.graphml", help="the true road graph")
     parser.add_argument("--level", default="medium", choices=list(LEVELS))
     parser.add_argument("--drives", type=int, default=2, help="drives per seed")
-    parser.add_argument("--seeds", default="1,2")
+    parser.add_argument("--seeds", type=seed_list, default=[1, 2])
     parser.add_argument("--start-every", type=float, default=300.0)
     parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE", help="override config keys")
     parser.add_argument("--configfile", default=str(REPO / "config" / "config.yaml"))
@@ -224,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
     with markdown_copy(args.out):
         conf = load(args.configfile, dotted_overrides(args.set))
         graph = RoadGraph.load(args.graph)
-        parts = [run(conf, graph, args.level, args.drives, int(s), args.start_every) for s in args.seeds.split(",")]
+        parts = [run(conf, graph, args.level, args.drives, int(s), args.start_every) for s in args.seeds]
         tab = pd.concat([p[0] for p in parts])
         rec = pd.concat([p[1] for p in parts])
         figures = summary(tab, rec, sum(p[2] for p in parts))

@@ -31,24 +31,13 @@ from pathlib import Path
 
 import pandas as pd
 
-from benchmarks.markdown import add_out_option, markdown_copy
+from benchmarks.markdown import add_out_option, markdown_copy, seed_list
 from topoloc.config import dotted_overrides, load
 from topoloc.experiments.map_error_starts import level_table, localize_error, table
 from topoloc.experiments.map_errors import plot_calibration
 from topoloc.odometry.map_errors import ERROR_TYPES
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def draws(seeds: str) -> list[int]:
-    """The draws (seeds of ``experiments.map_errors.seed``) of ``--seeds``: comma-separated integers."""
-    try:
-        out = [int(s) for s in seeds.split(",")]
-    except ValueError:
-        raise SystemExit(f"--seeds: {seeds!r} is not a comma-separated list of integers") from None
-    if len(set(out)) != len(out):
-        raise SystemExit(f"--seeds: {seeds!r} names a draw twice")
-    return out
 
 
 def per_draw(frame: pd.DataFrame, confirm_m: float) -> pd.DataFrame:
@@ -69,13 +58,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--localizers", default="metric,rnn_filter,hmm")
     parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE", help="override config keys")
     parser.add_argument("--configfile", default=str(REPO / "config" / "config.yaml"))
-    parser.add_argument("--seeds", default=None,
+    parser.add_argument("--seeds", type=seed_list, default=None,
                         help="draws of map errors and drives, comma-separated (experiments.map_errors.seed); "
                              "several: also the pooled figures per draw")
     parser.add_argument("--starts", type=Path, default=None, help="also write the per-start table (CSV) here")
     add_out_option(parser, "bench_map_errors")
     args = parser.parse_args(argv)
-    requested = draws(args.seeds) if args.seeds is not None else None
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     results = Path(args.results)
     inputs = {}
@@ -91,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
         exp = conf["experiments"]["map_errors"] | {
             "maps": maps, "drives": args.drives, "start_every_m": args.start_every,
             "localizers": args.localizers.split(","), "levels": args.levels.split(",")}
-        seeds = requested or [int(exp["seed"])]
+        seeds = args.seeds or [int(exp["seed"])]
         frames, cpu = [], {}
         began = time.time()
         with tempfile.TemporaryDirectory() as scratch:

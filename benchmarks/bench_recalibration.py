@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks.markdown import add_out_option, markdown_copy
+from benchmarks.markdown import add_out_option, markdown_copy, seed_list
 from topoloc.config import dotted_overrides, load
 from topoloc.experiments.map_error_starts import localize_error
 from topoloc.localization.calibration import LogitCalibration, expected_calibration_error, fit_logit_calibration
@@ -65,14 +65,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--levels", default="low,medium", help="map-error levels besides the exact map")
     parser.add_argument("--drives", type=int, default=2, help="random drives besides the three hard shapes")
     parser.add_argument("--start-every", type=float, default=100.0)
-    parser.add_argument("--fit-seeds", default="0", help="seeds of the drives the recalibration is fitted on")
-    parser.add_argument("--check-seeds", default="1", help="seeds of the drives it is checked on")
+    parser.add_argument("--fit-seeds", type=seed_list, default=[0], help="seeds of the drives the recalibration is fitted on")
+    parser.add_argument("--check-seeds", type=seed_list, default=[1], help="seeds of the drives it is checked on")
     parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE", help="override config keys")
     parser.add_argument("--configfile", default=str(REPO / "config" / "config.yaml"))
     add_out_option(parser, "bench_recalibration")
     args = parser.parse_args(argv)
-    if not args.fit_seeds.strip():
-        parser.error("--fit-seeds: at least one seed to fit on")
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     graph = Path(args.results) / "graph" / "graph.graphml"
     inputs = {"graph": str(graph)} if graph.is_file() else {}
@@ -85,14 +83,14 @@ def main(argv: list[str] | None = None) -> int:
                                                        "localization.metric.confidence_shift=0"]))
         sure = float(conf["localization"]["evaluate"]["sure"])
         began = time.time()
-        sets = {"fit": [int(s) for s in args.fit_seeds.split(",")], "check": [int(s) for s in args.check_seeds.split(",") if s]}
+        sets = {"fit": args.fit_seeds, "check": args.check_seeds}
         with tempfile.TemporaryDirectory() as scratch:
             data = {name: pd.concat([answers_of(conf, s, maps, args, inputs, Path(scratch)) for s in seeds], ignore_index=True)
-                    for name, seeds in sets.items() if seeds}
+                    for name, seeds in sets.items()}
         fitted = fit_logit_calibration(data["fit"].confidence, data["fit"].right)
         print(f"# The metric filter's confidence recalibrated: maps {', '.join(maps)}; errors {args.errors} at {args.levels}; "
               f"{args.drives} random drives + the three hard shapes per map, error type and level\n")
-        print(f"Fitted on seeds {args.fit_seeds} ({len(data['fit'])} answers): "
+        print(f"Fitted on seeds {','.join(map(str, args.fit_seeds))} ({len(data['fit'])} answers): "
               f"`localization.metric.confidence_scale: {fitted.scale:.3f}`, `confidence_shift: {fitted.shift:.3f}` "
               f"(configured: {configured.scale:g}, {configured.shift:g})\n")
         rows = []

@@ -1,4 +1,5 @@
-"""What every benchmark shares: its printed figures, also written as markdown to ``results/benchmarks/<name>.md``."""
+"""What every benchmark shares: its printed figures, also written as markdown to ``results/benchmarks/<name>.md``;
+its seed lists."""
 
 from __future__ import annotations
 
@@ -20,6 +21,17 @@ def add_out_option(parser: argparse.ArgumentParser, name: str) -> None:
     """``--out``: the markdown file the benchmark ``name`` writes its printed figures to."""
     parser.add_argument("--out", type=Path, default=OUT_DIR / f"{name}.md",
                         help="markdown copy of the printed figures (default: %(default)s)")
+
+
+def seed_list(text: str) -> list[int]:
+    """The ``type`` of a seed-list option (``--seeds 0,1,2``): comma-separated integers, at least one, none twice."""
+    try:
+        seeds = [int(s) for s in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of integers") from None
+    if len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"{text!r} names a seed twice")
+    return seeds
 
 
 class _Tee(io.TextIOBase):

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 import topoloc
+from benchmarks import bench_drive_maps, bench_filter_recovery, bench_map_errors, bench_recalibration
 from benchmarks.markdown import markdown_copy
 
 REPO = Path(__file__).resolve().parents[1]
@@ -48,3 +49,18 @@ def test_markdown_copy_leaves_no_file_when_the_benchmark_fails(tmp_path):
         print("half")
         raise RuntimeError("stopped")
     assert not (tmp_path / "bench.md").exists()
+
+
+@pytest.mark.parametrize("main, option", [(bench_map_errors.main, "--seeds"), (bench_filter_recovery.main, "--seeds"),
+                                          (bench_recalibration.main, "--fit-seeds"), (bench_recalibration.main, "--check-seeds"),
+                                          (bench_drive_maps.main, "--seeds")])
+@pytest.mark.parametrize("seeds, why", [("0,x", "not a comma-separated list of integers"), ("1,1", "names a seed twice"),
+                                        ("", "not a comma-separated list")])
+def test_a_bad_seed_list_is_one_line_naming_the_option_and_writes_nothing(main, option, seeds, why, tmp_path, capsys):
+    args = ["--map", "a=x", "--case", "a:a"] if main is bench_drive_maps.main else []
+    with pytest.raises(SystemExit) as stopped:
+        main([*args, option, seeds, "--out", str(tmp_path / "x.md")])
+    assert stopped.value.code == 2
+    error = capsys.readouterr().err.strip().splitlines()[-1]
+    assert option in error and why in error
+    assert not (tmp_path / "x.md").exists()

@@ -159,11 +159,3 @@ def test_the_map_error_benchmark_pools_draws_and_shows_each(tmp_path):
     assert [int(r[header.index("starts")]) for r in body] == [int((starts.draw == d).sum()) for d in (0, 1)]
     assert body[0][header.index("ece")] != body[1][header.index("ece")]
 
-
-@pytest.mark.parametrize("seeds", ["0,x", "1,1"])
-def test_the_map_error_benchmark_rejects_bad_seeds(seeds, tmp_path):
-    from benchmarks import bench_map_errors
-
-    with pytest.raises(SystemExit, match="--seeds"):
-        bench_map_errors.main(["--seeds", seeds, "--out", str(tmp_path / "x.md")])
-    assert not (tmp_path / "x.md").exists()
