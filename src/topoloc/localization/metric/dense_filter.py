@@ -83,12 +83,21 @@ class MetricFilter:
         self._split_at = min(self.grid.num_cells // 32, SPLIT_MAX)
         self._walks = model.settings.branches == "walks"
         self._distinct = DistinctKeys(self.filters * self.classes * self.grid.num_cells)  # (group, cell) keys
+        self._owner_of, self._owner = self.group, self.group  # the entries' filters, for the ``group`` they came from
 
     @property
     def num_cells(self) -> int:
         return self.grid.num_cells
 
     # -- entries ---------------------------------------------------------------------------------------------
+
+    @property
+    def owner(self) -> NDArray[np.int64]:
+        """The filter of each entry (``group // classes``), divided once per new ``group`` array (never changed
+        in place)."""
+        if self._owner_of is not self.group:
+            self._owner_of, self._owner = self.group, self.group // self.classes
+        return self._owner
 
     def _set(self, group, cell, weight, kappa, mean) -> None:
         self.group, self.cell, self.weight, self.kappa, self.mean = group, cell, weight, kappa, mean
@@ -98,18 +107,18 @@ class MetricFilter:
 
     def _counts(self, size: int = 1) -> NDArray[np.int64]:
         """Entries of every group (``size`` 1) or filter (``size`` = classes)."""
-        return np.bincount(self.group // size, minlength=self.filters * self.classes // size)
+        return np.bincount(self.group if size == 1 else self.owner, minlength=self.filters * self.classes // size)
 
     def _filter_max(self, values: NDArray[np.floating]) -> NDArray[np.float64]:
         """Per filter, the largest of its entries' ``values`` (0 for a filter without entries)."""
         out = np.zeros(self.filters, values.dtype)
-        np.maximum.at(out, self.group // self.classes, values)  # a per-filter max is exact in any order
+        np.maximum.at(out, self.owner, values)  # a per-filter max is exact in any order
         return out.astype(np.float64)
 
     def _merged(self, b: int, fresh: NDArray[np.float64] | None = None) -> tuple[NDArray, ...]:
         """Filter ``b``'s entries summed over its groups (plus ``fresh`` mass of unknown offset per cell), as
         entries of its nominal group."""
-        mine = self.group // self.classes == b
+        mine = self.owner == b
         weight = np.zeros(self.num_cells, REAL) if fresh is None else fresh.astype(REAL)
         np.add.at(weight, self.cell[mine], self.weight[mine])
         resultant = np.zeros(self.num_cells, COMPLEX)  # mass of unknown offset dilutes the resultant
@@ -125,7 +134,7 @@ class MetricFilter:
     def start(self, which: int | NDArray[np.int64] | None = None) -> None:
         """(Re)start filters ``which`` (default: all): uniform over the map (by road length), offset unknown."""
         which = np.arange(self.filters) if which is None else np.atleast_1d(np.asarray(which, np.int64))
-        keep = ~np.isin(self.group // self.classes, which)
+        keep = ~np.isin(self.owner, which)
         n = self.num_cells
         fresh = np.repeat(which * self.classes + self.center, n)
         self._set(np.concatenate([self.group[keep], fresh]), np.concatenate([self.cell[keep], np.tile(np.arange(n), len(which))]),
@@ -145,7 +154,7 @@ class MetricFilter:
     def stop(self, which: int | NDArray[np.int64]) -> None:
         """Stop filters ``which``: no entries, no steps (their history stays)."""
         which = np.atleast_1d(np.asarray(which, np.int64))
-        self._set(*self._keep(~np.isin(self.group // self.classes, which)))
+        self._set(*self._keep(~np.isin(self.owner, which)))
         self.running[which] = False
 
     def take(self, b: int) -> tuple[NDArray, ...]:
@@ -157,7 +166,7 @@ class MetricFilter:
     def seed(self, b: int, cell: NDArray[np.int64], weight: NDArray, kappa: NDArray, mean: NDArray,
              offmap: float, last_yaw: float) -> None:
         """(Re)start filter ``b`` from a given belief (entries of its nominal scale class), not from the uniform one."""
-        keep = self._keep(self.group // self.classes != b)
+        keep = self._keep(self.owner != b)
         fresh = (np.full(len(cell), b * self.classes + self.center), np.asarray(cell, np.int64), np.asarray(weight, REAL),
                  np.asarray(kappa, REAL), np.asarray(mean, COMPLEX))
         self._set(*(np.concatenate(p) for p in zip(keep, fresh)))
@@ -171,7 +180,7 @@ class MetricFilter:
         lost = np.flatnonzero(self.running & (self.offmap >= 0.5) & (self.settings.enter_prob > 0))
         if len(lost) == 0:
             return
-        parts = [self._keep(~np.isin(self.group // self.classes, lost))]
+        parts = [self._keep(~np.isin(self.owner, lost))]
         for b in lost:
             fresh = self.offmap[b] * self.settings.enter_prob * self.grid.prior
             parts.append(self._merged(int(b), fresh))
@@ -188,7 +197,7 @@ class MetricFilter:
         ready = np.flatnonzero(self.running & ~self.split & (counts > 0) & (counts <= self._split_at))
         if len(ready) == 0:
             return
-        mine = np.isin(self.group // self.classes, ready)
+        mine = np.isin(self.owner, ready)
         parts = [self._keep(~mine)]
         group, cell, weight, kappa, mean = self._keep(mine)
         for k, share in enumerate(self.model.class_prior):
@@ -267,16 +276,16 @@ class MetricFilter:
         model = self.model
         self._reenter()
         moves = self._moves(yaw)
-        before = np.bincount(self.group // self.classes, weights=self.weight, minlength=self.filters) if self._walks else None
+        before = np.bincount(self.owner, weights=self.weight, minlength=self.filters) if self._walks else None
         for move in (1, 2):
             if (moves >= move).any():
                 self._predict(direction, moves >= move)
         if before is not None:  # every way on from a node kept the whole probability: keep each filter's total
-            filt = self.group // self.classes
+            filt = self.owner
             after = np.bincount(filt, weights=self.weight, minlength=self.filters)
             self.weight = self.weight * (before / np.maximum(after, TINY))[filt].astype(REAL)
         leave = self.settings.leave_prob
-        filt = self.group // self.classes
+        filt = self.owner
         self.offmap += leave * np.bincount(filt, weights=self.weight, minlength=self.filters)  # float64 per filter
         kappa, kappa_obs, mean = self.kappa, model.kappa_obs[self.cell], self.mean
         sample = complex(math.cos(yaw), math.sin(yaw)) * model.unheading[self.cell]  # e^{i (yaw - h)}: an offset sample
@@ -309,7 +318,7 @@ class MetricFilter:
         """Each running filter's active cells of this step, most probable first (for :meth:`path`); when there
         are more than ``keep_top``, none (the trace then follows the motion and the heading)."""
         n = self.num_cells
-        filt = self.group // self.classes
+        filt = self.owner
         few = self._counts(self.classes) <= self.keep_top * self.classes
         mine = few[filt]
         keys, inverse = self._distinct(filt[mine] * n + self.cell[mine])
@@ -326,7 +335,7 @@ class MetricFilter:
     def edge_marginals(self) -> NDArray[np.float64]:
         """Probability of each undirected road, per filter: ``(filters, roads)``."""
         roads = self.grid.states.num_edges
-        filt = self.group // self.classes
+        filt = self.owner
         flat = np.bincount(filt * roads + self.grid.edge[self.cell], weights=self.weight, minlength=self.filters * roads)
         return flat.reshape(self.filters, roads)
 
@@ -339,7 +348,7 @@ class MetricFilter:
     def answers(self) -> list[Estimate]:
         """Per filter: the road of largest probability, its most probable cell, and that probability."""
         edge, confidence = self.roads()
-        filt = self.group // self.classes
+        filt = self.owner
         on = self.grid.edge[self.cell] == edge[filt]
         order = np.lexsort((-self.weight[on], filt[on]))
         which, cells = filt[on][order], self.cell[on][order]
@@ -362,7 +371,7 @@ class MetricFilter:
         """Per filter (or per filter in ``which``), its ``k`` most probable places
         (:func:`topoloc.localization.places.belief_places`), each ``shift_m`` metres on along its cell's heading
         (the distance driven since the last step)."""
-        return belief_places(self.group // self.classes, self.cell, self.weight, self.grid.edge, self.grid.xy,
+        return belief_places(self.owner, self.cell, self.weight, self.grid.edge, self.grid.xy,
                              self.filters, self.grid.states.num_edges, k, merge_m, which, shift_m, self.model.direction)
 
     def top_places(self, k: int, merge_m: float = 0.0, which: int = 0, shift_m: float = 0.0) -> list[Place]:
@@ -381,7 +390,7 @@ class MetricFilter:
         if not history or history[-1][2] is None or not len(history[-1][2]):
             return cells
         cells[-1] = history[-1][2][0]
-        on = (self.group // self.classes == which) & (self.cell == cells[-1])
+        on = (self.owner == which) & (self.cell == cells[-1])
         offset = complex(self.mean[on][np.argmax(self.weight[on])]) if on.any() else 1.0 + 0.0j
         for t in range(len(history) - 1, 0, -1):
             direction, _, _ = history[t]
