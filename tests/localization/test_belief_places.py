@@ -31,7 +31,7 @@ def test_places_of_some_filters_are_theirs_among_all(roads):
             assert belief_places(**args, which=np.array(which, np.int64)) == [every[f] for f in which]
 
 
-def test_a_place_is_a_roads_mass_at_its_largest_entry():
+def test_a_place_is_a_roads_mass_at_its_cell_of_most_mass():
     args = bank(3)
     owner, cell, weight, edge = args["owner"], args["cell"], args["weight"], args["cell_edge"]
     for f, places in enumerate(belief_places(**args)):
@@ -39,5 +39,22 @@ def test_a_place_is_a_roads_mass_at_its_largest_entry():
         assert [p.state for p in places] == list(np.argsort(-mass, kind="stable")[:2])
         for p in places:
             assert np.isclose(p.probability, mass[p.state])
-            on_road = np.flatnonzero((owner == f) & (edge[cell] == p.state))
-            assert p.xy[0] == cell[on_road[np.argmax(weight[on_road])]]  # cell k lies at x = k
+            per_cell = np.bincount(cell[owner == f], weights=weight[owner == f], minlength=8)
+            road_cells = np.flatnonzero(edge == p.state)
+            assert p.xy[0] == road_cells[np.argmax(per_cell[road_cells])]  # cell k lies at x = k
+
+
+def test_the_entries_of_one_cell_add_up_for_its_position():
+    # cell 0 held twice (two scale classes, 0.3 each) outweighs cell 1's single largest entry (0.4)
+    args = dict(owner=np.zeros(3, np.int64), cell=np.array([0, 1, 0]), weight=np.array([0.3, 0.4, 0.3]),
+                cell_edge=np.array([0, 0]), cell_xy=np.array([[0.0, 0.0], [1.0, 0.0]]), filters=1, roads=1, k=1)
+    [[place]] = belief_places(**args)
+    assert place.state == 0 and np.isclose(place.probability, 1.0) and place.xy[0] == 0.0
+
+
+def test_the_filters_distinct_keys_give_the_places_of_np_unique():
+    from topoloc.localization.metric.sparse_moves import DistinctKeys
+
+    for seed in range(5):
+        args = bank(seed, 12)
+        assert belief_places(**args, distinct=DistinctKeys(3 * 24)) == belief_places(**args)

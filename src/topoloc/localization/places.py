@@ -3,13 +3,14 @@ metric filter (:mod:`topoloc.localization.metric`) and of the token HMM (:mod:`t
 ``rnn_filter``); see :class:`topoloc.localizer.RankedFilter`.
 
 A place is a road (undirected edge): its probability is the belief's mass on the road's cells (both directions),
-its position the cell of the road's most probable entry (a filter split into scale classes holds a cell once
-per class: the best class's cell, not the cell of most mass summed over the classes). Of every filter the
-:data:`CANDIDATES` times ``k`` most probable roads are ranked, places within ``merge_m`` metres of a more probable one
-merged into it (:func:`topoloc.localizer.merge_places`).
+its position the road's cell of most mass (a filter split into scale classes holds a cell once per class: the
+classes' entries of a cell add up). Of every filter the :data:`CANDIDATES` times ``k`` most probable roads are
+ranked, places within ``merge_m`` metres of a more probable one merged into it (:func:`topoloc.localizer.merge_places`).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,12 +24,16 @@ CANDIDATES = 4
 def belief_places(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDArray, cell_edge: NDArray[np.int64],
                   cell_xy: NDArray[np.float64], filters: int, roads: int, k: int, merge_m: float = 0.0,
                   which: NDArray[np.int64] | None = None, shift_m: float = 0.0,
-                  cell_direction: NDArray[np.float64] | None = None) -> list[list[Place]]:
+                  cell_direction: NDArray[np.float64] | None = None,
+                  distinct: Callable[[NDArray[np.int64]], tuple[NDArray[np.int64], NDArray[np.int64]]] | None = None,
+                  ) -> list[list[Place]]:
     """Per filter of ``filters`` (or of those in ``which``, in its order), its top ``k`` places, from the belief's
     entries: the filter that ``owner``\\ s each entry, its ``cell`` and ``weight`` (entries of one cell may repeat:
     they add up); ``cell_edge`` and ``cell_xy`` give each cell's road and position on a map of ``roads`` roads.
-    A place's position is its best cell's moved ``shift_m`` metres along that cell's unit ``cell_direction``
-    ``(cells, 2)`` (the distance driven since the belief's last step)."""
+    A place's position is its road's cell of most mass, moved ``shift_m`` metres along that cell's unit
+    ``cell_direction`` ``(cells, 2)`` (the distance driven since the belief's last step). ``distinct`` finds the
+    distinct (filter, cell) keys as ``np.unique(keys, return_inverse=True)`` does (the default), for keys below
+    ``filters`` times the number of cells (:class:`topoloc.localization.metric.sparse_moves.DistinctKeys`, faster)."""
     owner, cell = np.asarray(owner, np.int64), np.asarray(cell, np.int64)
     weight = np.asarray(weight)
     key = owner * roads + cell_edge[cell]
@@ -43,11 +48,18 @@ def belief_places(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDA
     wanted = np.zeros(filters * roads, bool)
     wanted[(rows[:, None] * roads + top).ravel()] = True
     mine = np.flatnonzero(wanted[key] & (weight > 0))
-    best = np.zeros(filters * roads, weight.dtype)  # per (filter, road): the largest entry, and its cell
-    np.maximum.at(best, key[mine], weight[mine])
-    hit = mine[weight[mine] == best[key[mine]]][::-1]  # written last to first: the first entry of a tie wins
+    # the mass of each (filter, cell) on a wanted road: entries of one cell (scale classes, say) add up
+    cells = len(cell_xy)
+    keys = owner[mine] * cells + cell[mine]
+    owned, where = distinct(keys) if distinct is not None else np.unique(keys, return_inverse=True)
+    mass = np.bincount(where, weights=weight[mine], minlength=len(owned))
+    owned_cell = owned % cells
+    owned_key = owned // cells * roads + cell_edge[owned_cell]
+    best = np.zeros(filters * roads, mass.dtype)  # per (filter, road): the most mass on one cell, and that cell
+    np.maximum.at(best, owned_key, mass)
+    hit = np.flatnonzero(mass == best[owned_key])[::-1]  # written last to first: the lowest cell of a tie wins
     best_cell = np.zeros(filters * roads, np.int64)
-    best_cell[key[hit]] = cell[hit]
+    best_cell[owned_key[hit]] = owned_cell[hit]
     chosen = best_cell[rows[:, None] * roads + top]
     xy = cell_xy[chosen] if cell_direction is None or shift_m == 0 else cell_xy[chosen] + shift_m * cell_direction[chosen]
     xy = np.where((prob > 0)[..., None], xy, np.nan)

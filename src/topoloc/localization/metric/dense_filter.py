@@ -372,7 +372,8 @@ class MetricFilter:
         (:func:`topoloc.localization.places.belief_places`), each ``shift_m`` metres on along its cell's heading
         (the distance driven since the last step)."""
         return belief_places(self.owner, self.cell, self.weight, self.grid.edge, self.grid.xy,
-                             self.filters, self.grid.states.num_edges, k, merge_m, which, shift_m, self.model.direction)
+                             self.filters, self.grid.states.num_edges, k, merge_m, which, shift_m, self.model.direction,
+                             self._distinct)
 
     def top_places(self, k: int, merge_m: float = 0.0, which: int = 0, shift_m: float = 0.0) -> list[Place]:
         """The ``k`` most probable places of filter ``which`` (:class:`topoloc.localizer.RankedFilter`)."""
