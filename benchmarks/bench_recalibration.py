@@ -65,7 +65,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--levels", default="low,medium", help="map-error levels besides the exact map")
     parser.add_argument("--drives", type=int, default=2, help="random drives besides the three hard shapes")
     parser.add_argument("--start-every", type=float, default=100.0)
-    parser.add_argument("--fit-seeds", type=seed_list, default=[0], help="seeds of the drives the recalibration is fitted on")
+    parser.add_argument("--fit-seeds", type=seed_list, default=[0],
+                        help="seeds of the drives the recalibration is fitted on")
     parser.add_argument("--check-seeds", type=seed_list, default=[1], help="seeds of the drives it is checked on")
     parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE", help="override config keys")
     parser.add_argument("--configfile", default=str(REPO / "config" / "config.yaml"))

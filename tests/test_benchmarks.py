@@ -78,11 +78,11 @@ def test_markdown_copy_leaves_no_file_when_the_benchmark_fails(tmp_path):
     assert not (tmp_path / "bench.md").exists()
 
 
-@pytest.mark.parametrize("main, option", [(bench_map_errors.main, "--seeds"), (bench_filter_recovery.main, "--seeds"),
-                                          (bench_recalibration.main, "--fit-seeds"), (bench_recalibration.main, "--check-seeds"),
-                                          (bench_drive_maps.main, "--seeds")])
-@pytest.mark.parametrize("seeds, why", [("0,x", "not a comma-separated list of integers"), ("1,1", "names a seed twice"),
-                                        ("", "not a comma-separated list")])
+@pytest.mark.parametrize("main, option", [
+    (bench_map_errors.main, "--seeds"), (bench_filter_recovery.main, "--seeds"), (bench_drive_maps.main, "--seeds"),
+    (bench_recalibration.main, "--fit-seeds"), (bench_recalibration.main, "--check-seeds")])
+@pytest.mark.parametrize("seeds, why", [
+    ("0,x", "not a comma-separated list of integers"), ("1,1", "names a seed twice"), ("", "not a comma-separated list")])
 def test_a_bad_seed_list_is_one_line_naming_the_option_and_writes_nothing(main, option, seeds, why, tmp_path, capsys):
     args = ["--map", "a=x", "--case", "a:a"] if main is bench_drive_maps.main else []
     with pytest.raises(SystemExit) as stopped:
