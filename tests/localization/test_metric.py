@@ -117,6 +117,23 @@ def test_filter_max_is_the_largest_entry_of_each_filter(grid):
     assert bank._filter_max(weight) == pytest.approx(want)
 
 
+def test_a_split_beliefs_answer_is_its_roads_cell_of_most_mass(grid):
+    graph, road, conf = grid
+    model = MetricModel(graph, road.states, MetricSettings.from_conf(conf["localization"]["metric"]))
+    bank = MetricFilter(model, filters=2)
+    one, two = np.flatnonzero(model.grid.edge == model.grid.edge[0])[:2]  # two cells of one road
+    # filter 1: cell `one` held by two scale classes (0.3 each) outweighs cell `two`'s single largest entry (0.4)
+    assert bank.classes == 5
+    group = np.array([5, 7, 6])  # filter 1's classes 0, 2 and 1
+    bank._set(group, np.array([one, one, two]), np.array([0.3, 0.3, 0.4], np.float32), np.zeros(3, np.float32),
+              np.ones(3, np.complex64))
+    answer = bank.answers()[1]
+    assert answer.edge == model.grid.edge[0] and answer.cell == one and answer.confidence == pytest.approx(1.0)
+    [[], [place]] = bank.places(1)
+    assert place.state == answer.edge and tuple(place.xy) == tuple(model.grid.xy[one])
+    assert bank.answers()[0].edge == -1  # filter 0 holds nothing
+
+
 @pytest.mark.parametrize("level, seed", [("none", 1), ("low", 3), ("medium", 2), ("medium", 5)])
 def test_answers_are_not_behind_the_car(grid, level, seed):
     """Along the direction of travel the sure right answers lie around the car: neither a scale class rounded down to

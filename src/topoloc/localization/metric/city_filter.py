@@ -214,7 +214,7 @@ class CityFilter:
     # -- answers ---------------------------------------------------------------------------------------------
 
     def answers(self) -> list[Estimate]:
-        """Per filter: the road of largest probability, its most probable cell (a fine cell), that probability."""
+        """Per filter: the road of largest probability, its cell of most mass (a fine cell), that probability."""
         out = self.fine.answers()
         if self.coarse is None or not self.in_coarse.any():
             return out

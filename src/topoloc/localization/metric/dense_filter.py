@@ -346,12 +346,15 @@ class MetricFilter:
         return edge, marginal[np.arange(self.filters), edge]
 
     def answers(self) -> list[Estimate]:
-        """Per filter: the road of largest probability, its most probable cell, and that probability."""
+        """Per filter: the road of largest probability, its cell of most mass (the scale classes' entries of a cell
+        added up, as :meth:`places` adds them), and that probability."""
         edge, confidence = self.roads()
-        filt = self.owner
+        n, filt = self.num_cells, self.owner
         on = self.grid.edge[self.cell] == edge[filt]
-        order = np.lexsort((-self.weight[on], filt[on]))
-        which, cells = filt[on][order], self.cell[on][order]
+        keys, inverse = self._distinct(filt[on] * n + self.cell[on])
+        mass = np.bincount(inverse, weights=self.weight[on], minlength=len(keys))
+        keys = keys[np.lexsort((-mass, keys // n))]  # per filter, most mass first (the lowest cell of a tie)
+        which, cells = keys // n, keys % n
         first = np.searchsorted(which, np.arange(self.filters))
         out = []
         for b in range(self.filters):

@@ -132,7 +132,7 @@ class RestartingFilter:
     # -- answers: the main filters' ----------------------------------------------------------------------------
 
     def answers(self) -> list[Estimate]:
-        """Per main filter: the road of largest probability, its most probable cell, that probability."""
+        """Per main filter: the road of largest probability, its cell of most mass, that probability."""
         if self._answers is None:
             self._answers = self.bank.answers()
         return [self._answers[int(s)] for s in self.slot]
