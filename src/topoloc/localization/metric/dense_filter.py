@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from topoloc.localization.metric.map_model import MetricModel
 from topoloc.localization.metric.sparse_moves import DistinctKeys, gather_rows
 from topoloc.localization.metric.von_mises import concentration, resultant_length
-from topoloc.localization.places import belief_places
+from topoloc.localization.places import belief_places, cells_of_most_mass
 from topoloc.localizer import Place
 
 TWO_PI = 2.0 * math.pi
@@ -349,19 +349,17 @@ class MetricFilter:
         """Per filter: the road of largest probability, its cell of most mass (the scale classes' entries of a cell
         added up, as :meth:`places` adds them), and that probability."""
         edge, confidence = self.roads()
-        n, filt = self.num_cells, self.owner
-        on = self.grid.edge[self.cell] == edge[filt]
-        keys, inverse = self._distinct(filt[on] * n + self.cell[on])
-        mass = np.bincount(inverse, weights=self.weight[on], minlength=len(keys))
-        keys = keys[np.lexsort((-mass, keys // n))]  # per filter, most mass first (the lowest cell of a tie)
-        which, cells = keys // n, keys % n
-        first = np.searchsorted(which, np.arange(self.filters))
+        roads = self.grid.states.num_edges
+        on = np.flatnonzero(self.grid.edge[self.cell] == edge[self.owner])
+        mass, best = cells_of_most_mass(self.owner, self.cell, self.weight, self.grid.edge, self.num_cells, self.filters,
+                                        roads, on, self._distinct)
+        key = np.arange(self.filters) * roads + edge
         out = []
         for b in range(self.filters):
-            if first[b] >= len(which) or which[first[b]] != b:
+            if mass[key[b]] < 0:  # no entries on its road: none at all
                 out.append(Estimate(-1, -1, np.full(2, np.nan), 0.0, float(self.offmap[b])))
                 continue
-            cell = int(cells[first[b]])
+            cell = int(best[key[b]])
             out.append(Estimate(int(edge[b]), cell, self.grid.xy[cell].copy(), float(confidence[b]), float(self.offmap[b])))
         return out
 
