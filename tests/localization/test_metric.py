@@ -103,6 +103,38 @@ def test_filters_started_together_or_later_agree_with_a_single_filter(grid):
     assert (bank.path(2) == late.path()).all()
 
 
+def test_cell_sums_are_the_beliefs_mass_per_filter_and_cell_after_every_change(grid):
+    """The summed belief that the places, the answers and the path's record share is cached per set of entries: it
+    must follow every step, start and stop, and sum a split filter's classes."""
+    graph, road, conf = grid
+    model = MetricModel(graph, road.states, MetricSettings.from_conf(conf["localization"]["metric"]))
+    sim = simulate_pattern_drive(graph, 600.0, NOISE_LEVELS["medium"], np.random.default_rng(5))
+    steps = make("metric").observe(sim.odometry, road, conf).items
+    bank = MetricFilter(model, filters=3)
+
+    def check():
+        filt, cell, mass = bank.cell_sums()
+        keys, inverse = np.unique(bank.owner * bank.num_cells + bank.cell, return_inverse=True)
+        order = np.argsort(filt * bank.num_cells + cell)
+        np.testing.assert_array_equal((filt * bank.num_cells + cell)[order], keys)  # each (filter, cell) once
+        np.testing.assert_allclose(mass[order], np.bincount(inverse, weights=bank.weight), rtol=1e-12)
+
+    bank.start([0, 1])
+    check()
+    split_seen = False
+    for j, (direction, yaw, _) in enumerate(steps):
+        if j == 30:
+            bank.start(2)
+            check()
+        if j == 60:
+            bank.stop(0)
+            check()
+        bank.update(direction, yaw)
+        check()
+        split_seen |= bool(bank.split.any())
+    assert split_seen  # the classes' entries of a cell were summed
+
+
 def test_filter_max_is_the_largest_entry_of_each_filter(grid):
     graph, road, conf = grid
     model = MetricModel(graph, road.states, MetricSettings.from_conf(conf["localization"]["metric"]))
@@ -127,6 +159,7 @@ def test_a_split_beliefs_answer_is_its_roads_cell_of_most_mass(grid):
     group = np.array([5, 7, 6])  # filter 1's classes 0, 2 and 1
     bank._set(group, np.array([one, one, two]), np.array([0.3, 0.3, 0.4], np.float32), np.zeros(3, np.float32),
               np.ones(3, np.complex64))
+    bank.split[1] = True  # only a split filter holds a cell more than once
     answer = bank.answers()[1]
     assert answer.edge == model.grid.edge[0] and answer.cell == one and answer.confidence == pytest.approx(1.0)
     [[], [place]] = bank.places(1)

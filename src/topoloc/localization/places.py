@@ -24,24 +24,30 @@ CANDIDATES = 4
 Distinct = Callable[[NDArray[np.int64]], tuple[NDArray[np.int64], NDArray[np.int64]]]
 
 
-def cells_of_most_mass(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDArray, cell_edge: NDArray[np.int64],
-                       cells: int, filters: int, roads: int, mine: NDArray[np.int64],
-                       distinct: Distinct | None = None) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """Per (filter, road), at ``filter * roads + road``: the most mass the entries ``mine`` put on one cell of the
-    road (entries of one cell, as the scale classes', add up) and that cell, the lowest of a tie; -1 and 0 where
-    none of ``mine`` lies on the road. ``distinct`` finds the distinct (filter, cell) keys as
-    ``np.unique(keys, return_inverse=True)`` does (the default), for keys below ``filters`` times ``cells``
-    (:class:`topoloc.localization.metric.sparse_moves.DistinctKeys`, faster)."""
-    keys = owner[mine] * cells + cell[mine]
+def cell_sums(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDArray, cells: int,
+              distinct: Distinct | None = None) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+    """The entries of one (filter, cell) added up (a filter split into scale classes holds a cell once per class):
+    the distinct (filter, cell) pairs and their mass. ``distinct`` finds the distinct keys ``filter * cells + cell``
+    and numbers them as ``np.unique(keys, return_inverse=True)`` does (the default, in order of key), for keys
+    below ``filters`` times ``cells`` (:class:`topoloc.localization.metric.sparse_moves.DistinctKeys`: faster, in
+    no particular order)."""
+    keys = owner * cells + cell
     owned, where = distinct(keys) if distinct is not None else np.unique(keys, return_inverse=True)
-    mass = np.bincount(where, weights=weight[mine], minlength=len(owned))
-    owned_cell = owned % cells
-    owned_key = owned // cells * roads + cell_edge[owned_cell]
+    return owned // cells, owned % cells, np.bincount(where, weights=weight, minlength=len(owned))
+
+
+def cells_of_most_mass(owner: NDArray[np.int64], cell: NDArray[np.int64], mass: NDArray, cell_edge: NDArray[np.int64],
+                       filters: int, roads: int) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Per (filter, road), at ``filter * roads + road``: the most ``mass`` on one cell of the road and that cell, the
+    lowest of a tie; -1 and 0 where none of the pairs lies on the road. Each (``owner``, ``cell``) pair appears
+    once (:func:`cell_sums`)."""
+    key = owner * roads + cell_edge[cell]
     best = np.full(filters * roads, -1.0)
-    np.maximum.at(best, owned_key, mass)
-    hit = np.flatnonzero(mass == best[owned_key])[::-1]  # written last to first: the lowest cell of a tie wins
+    np.maximum.at(best, key, mass)
+    hit = np.flatnonzero(mass == best[key])
+    hit = hit[np.argsort(-cell[hit], kind="stable")]  # written from the highest cell down: the lowest of a tie wins
     best_cell = np.zeros(filters * roads, np.int64)
-    best_cell[owned_key[hit]] = owned_cell[hit]
+    best_cell[key[hit]] = cell[hit]
     return best, best_cell
 
 
@@ -49,13 +55,13 @@ def belief_places(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDA
                   cell_xy: NDArray[np.float64], filters: int, roads: int, k: int, merge_m: float = 0.0,
                   which: NDArray[np.int64] | None = None, shift_m: float = 0.0,
                   cell_direction: NDArray[np.float64] | None = None,
-                  distinct: Distinct | None = None) -> list[list[Place]]:
+                  distinct: Distinct | None = None, summed: bool = False) -> list[list[Place]]:
     """Per filter of ``filters`` (or of those in ``which``, in its order), its top ``k`` places, from the belief's
     entries: the filter that ``owner``\\ s each entry, its ``cell`` and ``weight`` (entries of one cell may repeat:
     they add up); ``cell_edge`` and ``cell_xy`` give each cell's road and position on a map of ``roads`` roads.
     A place's position is its road's cell of most mass, moved ``shift_m`` metres along that cell's unit
     ``cell_direction`` ``(cells, 2)`` (the distance driven since the belief's last step); ``distinct`` as in
-    :func:`cells_of_most_mass`."""
+    :func:`cell_sums`. With ``summed`` the entries are already one per (filter, cell) (:func:`cell_sums`)."""
     owner, cell = np.asarray(owner, np.int64), np.asarray(cell, np.int64)
     weight = np.asarray(weight)
     key = owner * roads + cell_edge[cell]
@@ -70,7 +76,9 @@ def belief_places(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDA
     wanted = np.zeros(filters * roads, bool)
     wanted[(rows[:, None] * roads + top).ravel()] = True
     mine = np.flatnonzero(wanted[key] & (weight > 0))
-    _, best_cell = cells_of_most_mass(owner, cell, weight, cell_edge, len(cell_xy), filters, roads, mine, distinct)
+    pairs = (owner[mine], cell[mine], weight[mine])
+    _, best_cell = cells_of_most_mass(*(pairs if summed else cell_sums(*pairs, len(cell_xy), distinct)), cell_edge,
+                                      filters, roads)
     chosen = best_cell[rows[:, None] * roads + top]
     xy = cell_xy[chosen] if cell_direction is None or shift_m == 0 else cell_xy[chosen] + shift_m * cell_direction[chosen]
     xy = np.where((prob > 0)[..., None], xy, np.nan)

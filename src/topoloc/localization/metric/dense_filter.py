@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from topoloc.localization.metric.map_model import MetricModel
 from topoloc.localization.metric.sparse_moves import DistinctKeys, gather_rows
 from topoloc.localization.metric.von_mises import concentration, resultant_length
-from topoloc.localization.places import belief_places, cells_of_most_mass
+from topoloc.localization.places import belief_places, cell_sums, cells_of_most_mass
 from topoloc.localizer import Place
 
 TWO_PI = 2.0 * math.pi
@@ -84,6 +84,7 @@ class MetricFilter:
         self._walks = model.settings.branches == "walks"
         self._distinct = DistinctKeys(self.filters * self.classes * self.grid.num_cells)  # (group, cell) keys
         self._owner_of, self._owner = self.group, self.group  # the entries' filters, for the ``group`` they came from
+        self._sums_of: tuple[NDArray, ...] = ()  # the entries the cached :meth:`cell_sums` are of
 
     @property
     def num_cells(self) -> int:
@@ -98,6 +99,26 @@ class MetricFilter:
         if self._owner_of is not self.group:
             self._owner_of, self._owner = self.group, self.group // self.classes
         return self._owner
+
+    def cell_sums(self) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+        """The belief summed over the scale classes: each (filter, cell) it holds once, as (filter, cell, mass).
+
+        Only a split filter holds a cell more than once (its entries are summed); the others' entries are their own
+        sums. Computed once per set of entries (the places, the answers and the path's record of a step share it):
+        the entries' arrays are only ever replaced, never changed in place."""
+        if len(self._sums_of) != 3 or any(a is not b for a, b in zip(self._sums_of, (self.group, self.cell, self.weight))):
+            owner = self.owner
+            split = self.split[owner]
+            if split.any():
+                once = ~split
+                filt, cell, mass = cell_sums(owner[split], self.cell[split], self.weight[split], self.num_cells,
+                                             self._distinct)
+                self._sums = (np.concatenate([owner[once], filt]), np.concatenate([self.cell[once], cell]),
+                              np.concatenate([self.weight[once].astype(np.float64), mass]))
+            else:
+                self._sums = (owner, self.cell, self.weight.astype(np.float64))
+            self._sums_of = (self.group, self.cell, self.weight)
+        return self._sums
 
     def _set(self, group, cell, weight, kappa, mean) -> None:
         self.group, self.cell, self.weight, self.kappa, self.mean = group, cell, weight, kappa, mean
@@ -317,17 +338,16 @@ class MetricFilter:
     def _remember(self, direction: int, yaw: float) -> None:
         """Each running filter's active cells of this step, most probable first (for :meth:`path`); when there
         are more than ``keep_top``, none (the trace then follows the motion and the heading)."""
-        n = self.num_cells
-        filt = self.owner
         few = self._counts(self.classes) <= self.keep_top * self.classes
+        filt, cell, mass = self.cell_sums()
         mine = few[filt]
-        keys, inverse = self._distinct(filt[mine] * n + self.cell[mine])
-        weight = np.bincount(inverse, weights=self.weight[mine], minlength=len(keys))  # summed over the scale classes
-        keys = keys[np.lexsort((-weight, keys // n))]
-        bounds = np.searchsorted(keys // n, np.arange(self.filters + 1))
+        filt, cell, mass = filt[mine], cell[mine], mass[mine]
+        order = np.lexsort((cell, -mass, filt))  # per filter by mass, the lowest cell of a tie first
+        cell = cell[order]
+        bounds = np.searchsorted(filt[order], np.arange(self.filters + 1))
         for b in np.flatnonzero(self.running):
             a, z = bounds[b], bounds[b + 1]
-            cells = keys[a:z] % n if few[b] and z - a <= self.keep_top else None
+            cells = cell[a:z] if few[b] and z - a <= self.keep_top else None
             self.history[b].append((int(direction), float(yaw), cells))
 
     # -- answers ---------------------------------------------------------------------------------------------
@@ -335,8 +355,8 @@ class MetricFilter:
     def edge_marginals(self) -> NDArray[np.float64]:
         """Probability of each undirected road, per filter: ``(filters, roads)``."""
         roads = self.grid.states.num_edges
-        filt = self.owner
-        flat = np.bincount(filt * roads + self.grid.edge[self.cell], weights=self.weight, minlength=self.filters * roads)
+        filt, cell, mass = self.cell_sums()
+        flat = np.bincount(filt * roads + self.grid.edge[cell], weights=mass, minlength=self.filters * roads)
         return flat.reshape(self.filters, roads)
 
     def roads(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
@@ -350,13 +370,13 @@ class MetricFilter:
         added up, as :meth:`places` adds them), and that probability."""
         edge, confidence = self.roads()
         roads = self.grid.states.num_edges
-        on = np.flatnonzero(self.grid.edge[self.cell] == edge[self.owner])
-        mass, best = cells_of_most_mass(self.owner, self.cell, self.weight, self.grid.edge, self.num_cells, self.filters,
-                                        roads, on, self._distinct)
+        filt, cell, mass = self.cell_sums()
+        on = self.grid.edge[cell] == edge[filt]
+        most, best = cells_of_most_mass(filt[on], cell[on], mass[on], self.grid.edge, self.filters, roads)
         key = np.arange(self.filters) * roads + edge
         out = []
         for b in range(self.filters):
-            if mass[key[b]] < 0:  # no entries on its road: none at all
+            if most[key[b]] < 0:  # no entries on its road: none at all
                 out.append(Estimate(-1, -1, np.full(2, np.nan), 0.0, float(self.offmap[b])))
                 continue
             cell = int(best[key[b]])
@@ -372,9 +392,9 @@ class MetricFilter:
         """Per filter (or per filter in ``which``), its ``k`` most probable places
         (:func:`topoloc.localization.places.belief_places`), each ``shift_m`` metres on along its cell's heading
         (the distance driven since the last step)."""
-        return belief_places(self.owner, self.cell, self.weight, self.grid.edge, self.grid.xy,
-                             self.filters, self.grid.states.num_edges, k, merge_m, which, shift_m, self.model.direction,
-                             self._distinct)
+        filt, cell, mass = self.cell_sums()
+        return belief_places(filt, cell, mass, self.grid.edge, self.grid.xy, self.filters, self.grid.states.num_edges, k,
+                             merge_m, which, shift_m, self.model.direction, summed=True)
 
     def top_places(self, k: int, merge_m: float = 0.0, which: int = 0, shift_m: float = 0.0) -> list[Place]:
         """The ``k`` most probable places of filter ``which`` (:class:`topoloc.localizer.RankedFilter`)."""
