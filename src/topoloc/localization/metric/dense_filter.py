@@ -253,26 +253,31 @@ class MetricFilter:
         n = self.num_cells
         count = self._counts()
         dense = movers & (count > self._dense)
-        carried = self.weight * resultant_length(self.kappa) * self.mean
+        still = ~movers[self.group]
+        entries = (self.group, self.cell, self.weight, self.kappa, self.mean)
+        moving = ~still
+        group, cell, weight, kappa, mean = entries if moving.all() else (a[moving] for a in entries)  # the movers'
+        carried = weight * resultant_length(kappa) * mean
         moved: dict[int, tuple] = {}
         for g in np.flatnonzero(dense):  # a broad belief: one sparse matrix product
-            mine = self.group == g
+            mine = group == g
+            at, flow = cell[mine], carried[mine]
             flows = []
-            for part in (self.weight[mine], carried[mine].real, carried[mine].imag):
+            for part in (weight[mine], flow.real, flow.imag):
                 full = np.zeros(n, REAL)
-                full[self.cell[mine]] = part
+                full[at] = part
                 flows.append(cols @ full)
             cells = np.flatnonzero(flows[0] > 0)
             moved[int(g)] = (cells, flows[0][cells], (flows[1][cells] + 1j * flows[2][cells]).astype(COMPLEX))
-        sparse = (movers & ~dense)[self.group]
+        sparse = ~dense[group]
         if sparse.any():  # concentrated beliefs, all groups together: the moves of their cells
-            owner, dst, p = gather_rows(rows, self.cell[sparse])
-            keys, inverse = self._distinct(self.group[sparse][owner] * n + dst)
+            owner, dst, p = gather_rows(rows, cell[sparse])
+            keys, inverse = self._distinct(group[sparse][owner] * n + dst)
             flow = carried[sparse][owner] * p
-            weight = np.bincount(inverse, weights=self.weight[sparse][owner] * p, minlength=len(keys)).astype(REAL)
+            sums = np.bincount(inverse, weights=weight[sparse][owner] * p, minlength=len(keys)).astype(REAL)
             resultant = (np.bincount(inverse, weights=flow.real, minlength=len(keys))
                          + 1j * np.bincount(inverse, weights=flow.imag, minlength=len(keys))).astype(COMPLEX)
-            moved[-1] = (keys, weight, resultant)  # groups in order, as keys group * n + cell
+            moved[-1] = (keys, sums, resultant)  # as keys group * n + cell
         if not moved:
             return
         group = np.concatenate([np.full(len(c), g) if g >= 0 else c // n for g, (c, _, _) in moved.items()])
@@ -282,14 +287,10 @@ class MetricFilter:
         kappa = concentration(length / np.maximum(weight, TINY))
         kappa = kappa / (1.0 + kappa * model.drift[cell])  # the offset diffuses: variance 1 / kappa + drift
         mean = np.where(length > 0, resultant / np.maximum(length, TINY), 1.0)
-        still = ~movers[self.group]
-        if not still.any():  # every group moved (the common case): no copy, the dtypes a concatenation would give
-            self._set(*(b.astype(np.result_type(a, b), copy=False)
-                        for a, b in zip((self.group, self.cell, self.weight, self.kappa, self.mean), (group, cell, weight, kappa, mean))))
+        if not still.any():  # every group moved: no copy, the dtypes a concatenation would give
+            self._set(*(b.astype(np.result_type(a, b), copy=False) for a, b in zip(entries, (group, cell, weight, kappa, mean))))
             return
-        self.group, self.cell, self.weight, self.kappa, self.mean = (
-            np.concatenate([a[still], b]) for a, b in zip((self.group, self.cell, self.weight, self.kappa, self.mean),
-                                                          (group, cell, weight, kappa, mean)))
+        self._set(*(np.concatenate([a[still], b]) for a, b in zip(entries, (group, cell, weight, kappa, mean))))
 
     def update(self, direction: int, yaw: float) -> None:
         """One step of ``cell_m`` forward (``direction`` > 0) or back, with the odometry's ``yaw`` (radians),
