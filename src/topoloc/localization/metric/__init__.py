@@ -54,6 +54,7 @@ The modules of this package:
   model (step transitions) and the measurement model (heading evidence, off the map);
 * :mod:`~topoloc.localization.metric.von_mises`: the heading-offset belief's circular statistics;
 * :mod:`~topoloc.localization.metric.dense_filter`: the belief over every cell, for one or many starts;
+* :mod:`~topoloc.localization.metric.trace`: a filter's path traced back through its record of the steps;
 * :mod:`~topoloc.localization.metric.city_filter`: the city-scale variant (coarse cells while the belief is
   broad);
 * :mod:`~topoloc.localization.metric.restart`: filters that race a fresh one after losing their track

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from topoloc.localization.metric.map_model import MetricModel
 from topoloc.localization.metric.sparse_moves import DistinctKeys, gather_rows
+from topoloc.localization.metric.trace import Step, ranked_cells, trace_back
 from topoloc.localization.metric.von_mises import concentration, resultant_length
 from topoloc.localization.places import belief_places, cell_sums, cells_of_most_mass
 from topoloc.localizer import Place
@@ -76,7 +77,7 @@ class MetricFilter:
         self.running = np.zeros(self.filters, bool)
         self.split = np.zeros(self.filters, bool)
         # per filter and step: direction, yaw and the active cells by probability (None while there are many)
-        self.history: list[list[tuple[int, float, NDArray[np.int64] | None]]] = [[] for _ in range(self.filters)]
+        self.history: list[list[Step]] = [[] for _ in range(self.filters)]
         self._dense = self.grid.num_cells // 8  # entries above which a group moves by one sparse matrix product
         # entries at or below which a filter splits into its scale classes: once the belief holds a few
         # percent of the map, where each split entry costs ``classes`` times as much
@@ -340,16 +341,9 @@ class MetricFilter:
         """Each running filter's active cells of this step, most probable first (for :meth:`path`); when there
         are more than ``keep_top``, none (the trace then follows the motion and the heading)."""
         few = self._counts(self.classes) <= self.keep_top * self.classes
-        filt, cell, mass = self.cell_sums()
-        mine = few[filt]
-        filt, cell, mass = filt[mine], cell[mine], mass[mine]
-        order = np.lexsort((cell, -mass, filt))  # per filter by mass, the lowest cell of a tie first
-        cell = cell[order]
-        bounds = np.searchsorted(filt[order], np.arange(self.filters + 1))
+        active = ranked_cells(*self.cell_sums(), self.filters, few, self.keep_top)
         for b in np.flatnonzero(self.running):
-            a, z = bounds[b], bounds[b + 1]
-            cells = cell[a:z] if few[b] and z - a <= self.keep_top else None
-            self.history[b].append((int(direction), float(yaw), cells))
+            self.history[b].append((int(direction), float(yaw), active[b]))
 
     # -- answers ---------------------------------------------------------------------------------------------
 
@@ -402,34 +396,11 @@ class MetricFilter:
         return self.places(k, merge_m, shift_m=shift_m)[which]
 
     def path(self, which: int = 0) -> NDArray[np.int64]:
-        """A consistent cell sequence of filter ``which``, traced back from its last step's most probable cell.
-
-        At each earlier step the cell is one of those the transition leads from to the cell chosen after it:
-        the most probable of them among the step's active cells where they were kept, else the likeliest by the
-        move and by how its map heading plus the offset carried back along the path agrees with that step's yaw.
-        """
+        """A consistent cell sequence of filter ``which``, traced back from its last step's most probable cell
+        (:func:`topoloc.localization.metric.trace.trace_back`, with that cell's heading offset)."""
         history = self.history[which]
-        cells = np.full(len(history), -1, np.int64)
         if not history or history[-1][2] is None or not len(history[-1][2]):
-            return cells
-        cells[-1] = history[-1][2][0]
-        on = (self.owner == which) & (self.cell == cells[-1])
+            return np.full(len(history), -1, np.int64)
+        on = (self.owner == which) & (self.cell == history[-1][2][0])
         offset = complex(self.mean[on][np.argmax(self.weight[on])]) if on.any() else 1.0 + 0.0j
-        for t in range(len(history) - 1, 0, -1):
-            direction, _, _ = history[t]
-            cols = self.model.forward_cols if direction > 0 else self.model.backward_cols
-            sources = cols.indices[cols.indptr[cells[t]]:cols.indptr[cells[t] + 1]]
-            moves = cols.data[cols.indptr[cells[t]]:cols.indptr[cells[t] + 1]]
-            if len(sources) == 0:
-                break
-            kept = history[t - 1][2]
-            ranked = np.flatnonzero((kept[:, None] == sources[None, :]).any(axis=1)) if kept is not None else np.zeros(0, np.int64)
-            if len(ranked):
-                cells[t - 1] = kept[ranked[0]]
-            else:
-                agree = (np.exp(1j * history[t - 1][1]) * self.model.unheading[sources] * np.conj(offset)).real
-                score = np.log(moves) + self.model.kappa_obs[sources] * (agree - 1.0)  # the move and the heading
-                cells[t - 1] = sources[int(np.argmax(score))]
-            sample = np.exp(1j * history[t - 1][1]) * self.model.unheading[cells[t - 1]]
-            offset = (0.9 * offset + 0.1 * sample) / abs(0.9 * offset + 0.1 * sample)  # follows slow drift back
-        return cells
+        return trace_back(self.model, history, offset)
