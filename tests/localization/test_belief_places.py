@@ -58,3 +58,13 @@ def test_the_filters_distinct_keys_give_the_places_of_np_unique():
     for seed in range(5):
         args = bank(seed, 12)
         assert belief_places(**args, distinct=DistinctKeys(3 * 24)) == belief_places(**args)
+
+
+def test_the_cell_of_most_mass_breaks_a_tie_to_the_lowest_cell_in_any_order():
+    from topoloc.localization.places import cells_of_most_mass
+
+    owner, cell, mass = np.zeros(4, np.int64), np.array([5, 2, 7, 3]), np.array([0.3, 0.1, 0.3, 0.3])
+    edge = np.zeros(8, np.int64)  # one road
+    for order in ([0, 1, 2, 3], [3, 2, 1, 0], [2, 0, 3, 1]):
+        best, best_cell = cells_of_most_mass(owner[order], cell[order], mass[order], edge, 1, 1)
+        assert best[0] == 0.3 and best_cell[0] == 3

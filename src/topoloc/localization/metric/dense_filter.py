@@ -341,9 +341,9 @@ class MetricFilter:
         """Each running filter's active cells of this step, most probable first (for :meth:`path`); when there
         are more than ``keep_top``, none (the trace then follows the motion and the heading)."""
         few = self._counts(self.classes) <= self.keep_top * self.classes
-        active = ranked_cells(*self.cell_sums(), self.filters, few, self.keep_top)
-        for b in np.flatnonzero(self.running):
-            self.history[b].append((int(direction), float(yaw), active[b]))
+        running = np.flatnonzero(self.running)
+        for b, cells in zip(running.tolist(), ranked_cells(*self.cell_sums(), running, few, self.keep_top)):
+            self.history[b].append((int(direction), float(yaw), cells))
 
     # -- answers ---------------------------------------------------------------------------------------------
 

@@ -12,17 +12,17 @@ from topoloc.localization.metric.map_model import MetricModel
 Step = tuple[int, float, NDArray[np.int64] | None]
 
 
-def ranked_cells(filt: NDArray[np.int64], cell: NDArray[np.int64], mass: NDArray[np.float64], filters: int,
+def ranked_cells(filt: NDArray[np.int64], cell: NDArray[np.int64], mass: NDArray[np.float64], which: NDArray[np.int64],
                  few: NDArray[np.bool_], keep_top: int) -> list[NDArray[np.int64] | None]:
-    """Per filter, the cells of a belief given once per (``filt``, ``cell``) with their ``mass``, most probable first
-    (the lowest cell of a tie first): a step's record; None for a filter not ``few`` or with more than ``keep_top``."""
+    """Per filter in ``which``, the cells of a belief given once per (``filt``, ``cell``) with their ``mass``, most
+    probable first (the lowest cell of a tie first): a step's record; None for a filter not ``few`` (per filter) or
+    with more than ``keep_top`` cells."""
     mine = few[filt]
     filt, cell, mass = filt[mine], cell[mine], mass[mine]
     order = np.lexsort((cell, -mass, filt))
     cell = cell[order]
-    bounds = np.searchsorted(filt[order], np.arange(filters + 1))
-    return [cell[bounds[b]:bounds[b + 1]] if few[b] and bounds[b + 1] - bounds[b] <= keep_top else None
-            for b in range(filters)]
+    bounds = np.searchsorted(filt[order], np.stack([which, which + 1]))
+    return [cell[a:z] if few[b] and z - a <= keep_top else None for b, a, z in zip(which.tolist(), *bounds.tolist())]
 
 
 def trace_back(model: MetricModel, history: list[Step], offset: complex) -> NDArray[np.int64]:
