@@ -103,7 +103,7 @@ def test_filters_started_together_or_later_agree_with_a_single_filter(grid):
     assert (bank.path(2) == late.path()).all()
 
 
-def test_cell_sums_are_the_beliefs_mass_per_filter_and_cell_after_every_change(grid):
+def test_the_summed_belief_is_the_mass_per_filter_and_cell_after_every_change(grid):
     """The summed belief that the places, the answers and the path's record share is cached per set of entries: it
     must follow every step, start and stop, and sum a split filter's classes."""
     graph, road, conf = grid
@@ -113,7 +113,7 @@ def test_cell_sums_are_the_beliefs_mass_per_filter_and_cell_after_every_change(g
     bank = MetricFilter(model, filters=3)
 
     def check():
-        filt, cell, mass = bank.cell_sums()
+        filt, cell, mass = bank.summed_belief()
         keys, inverse = np.unique(bank.owner * bank.num_cells + bank.cell, return_inverse=True)
         order = np.argsort(filt * bank.num_cells + cell)
         np.testing.assert_array_equal((filt * bank.num_cells + cell)[order], keys)  # each (filter, cell) once

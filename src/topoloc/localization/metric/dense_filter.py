@@ -85,7 +85,7 @@ class MetricFilter:
         self._walks = model.settings.branches == "walks"
         self._distinct = DistinctKeys(self.filters * self.classes * self.grid.num_cells)  # (group, cell) keys
         self._owner_of, self._owner = self.group, self.group  # the entries' filters, for the ``group`` they came from
-        self._sums_of: tuple[NDArray, ...] = ()  # the entries the cached :meth:`cell_sums` are of
+        self._summed_of: tuple[NDArray | None, ...] = (None, None, None)  # the entries :meth:`summed_belief` is of
 
     @property
     def num_cells(self) -> int:
@@ -101,25 +101,25 @@ class MetricFilter:
             self._owner_of, self._owner = self.group, self.group // self.classes
         return self._owner
 
-    def cell_sums(self) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+    def summed_belief(self) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
         """The belief summed over the scale classes: each (filter, cell) it holds once, as (filter, cell, mass).
 
         Only a split filter holds a cell more than once (its entries are summed); the others' entries are their own
         sums. Computed once per set of entries (the places, the answers and the path's record of a step share it):
         the entries' arrays are only ever replaced, never changed in place."""
-        if len(self._sums_of) != 3 or any(a is not b for a, b in zip(self._sums_of, (self.group, self.cell, self.weight))):
+        if any(a is not b for a, b in zip(self._summed_of, (self.group, self.cell, self.weight))):
             owner = self.owner
             split = self.split[owner]
             if split.any():
                 once = ~split
                 filt, cell, mass = cell_sums(owner[split], self.cell[split], self.weight[split], self.num_cells,
                                              self._distinct)
-                self._sums = (np.concatenate([owner[once], filt]), np.concatenate([self.cell[once], cell]),
+                self._summed = (np.concatenate([owner[once], filt]), np.concatenate([self.cell[once], cell]),
                               np.concatenate([self.weight[once].astype(np.float64), mass]))
             else:
-                self._sums = (owner, self.cell, self.weight.astype(np.float64))
-            self._sums_of = (self.group, self.cell, self.weight)
-        return self._sums
+                self._summed = (owner, self.cell, self.weight.astype(np.float64))
+            self._summed_of = (self.group, self.cell, self.weight)
+        return self._summed
 
     def _set(self, group, cell, weight, kappa, mean) -> None:
         self.group, self.cell, self.weight, self.kappa, self.mean = group, cell, weight, kappa, mean
@@ -254,10 +254,10 @@ class MetricFilter:
         n = self.num_cells
         count = self._counts()
         dense = movers & (count > self._dense)
-        still = ~movers[self.group]
+        moving = movers[self.group]
+        everyone = bool(moving.all())
         entries = (self.group, self.cell, self.weight, self.kappa, self.mean)
-        moving = ~still
-        group, cell, weight, kappa, mean = entries if moving.all() else (a[moving] for a in entries)  # the movers'
+        group, cell, weight, kappa, mean = entries if everyone else (a[moving] for a in entries)  # the movers'
         carried = weight * resultant_length(kappa) * mean
         moved: dict[int, tuple] = {}
         for g in np.flatnonzero(dense):  # a broad belief: one sparse matrix product
@@ -288,10 +288,10 @@ class MetricFilter:
         kappa = concentration(length / np.maximum(weight, TINY))
         kappa = kappa / (1.0 + kappa * model.drift[cell])  # the offset diffuses: variance 1 / kappa + drift
         mean = np.where(length > 0, resultant / np.maximum(length, TINY), 1.0)
-        if not still.any():  # every group moved: no copy, the dtypes a concatenation would give
+        if everyone:  # no copy, the dtypes a concatenation would give
             self._set(*(b.astype(np.result_type(a, b), copy=False) for a, b in zip(entries, (group, cell, weight, kappa, mean))))
             return
-        self._set(*(np.concatenate([a[still], b]) for a, b in zip(entries, (group, cell, weight, kappa, mean))))
+        self._set(*(np.concatenate([a[~moving], b]) for a, b in zip(entries, (group, cell, weight, kappa, mean))))
 
     def update(self, direction: int, yaw: float) -> None:
         """One step of ``cell_m`` forward (``direction`` > 0) or back, with the odometry's ``yaw`` (radians),
@@ -342,7 +342,7 @@ class MetricFilter:
         are more than ``keep_top``, none (the trace then follows the motion and the heading)."""
         few = self._counts(self.classes) <= self.keep_top * self.classes
         running = np.flatnonzero(self.running)
-        for b, cells in zip(running.tolist(), ranked_cells(*self.cell_sums(), running, few, self.keep_top)):
+        for b, cells in zip(running.tolist(), ranked_cells(*self.summed_belief(), running, few, self.keep_top)):
             self.history[b].append((int(direction), float(yaw), cells))
 
     # -- answers ---------------------------------------------------------------------------------------------
@@ -350,7 +350,7 @@ class MetricFilter:
     def edge_marginals(self) -> NDArray[np.float64]:
         """Probability of each undirected road, per filter: ``(filters, roads)``."""
         roads = self.grid.states.num_edges
-        filt, cell, mass = self.cell_sums()
+        filt, cell, mass = self.summed_belief()
         flat = np.bincount(filt * roads + self.grid.edge[cell], weights=mass, minlength=self.filters * roads)
         return flat.reshape(self.filters, roads)
 
@@ -365,7 +365,7 @@ class MetricFilter:
         added up, as :meth:`places` adds them), and that probability."""
         edge, confidence = self.roads()
         roads = self.grid.states.num_edges
-        filt, cell, mass = self.cell_sums()
+        filt, cell, mass = self.summed_belief()
         on = self.grid.edge[cell] == edge[filt]
         most, best = cells_of_most_mass(filt[on], cell[on], mass[on], self.grid.edge, self.filters, roads)
         key = np.arange(self.filters) * roads + edge
@@ -387,7 +387,7 @@ class MetricFilter:
         """Per filter (or per filter in ``which``), its ``k`` most probable places
         (:func:`topoloc.localization.places.belief_places`), each ``shift_m`` metres on along its cell's heading
         (the distance driven since the last step)."""
-        filt, cell, mass = self.cell_sums()
+        filt, cell, mass = self.summed_belief()
         return belief_places(filt, cell, mass, self.grid.edge, self.grid.xy, self.filters, self.grid.states.num_edges, k,
                              merge_m, which, shift_m, self.model.direction, summed=True)
 
