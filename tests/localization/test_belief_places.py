@@ -52,14 +52,6 @@ def test_the_entries_of_one_cell_add_up_for_its_position():
     assert place.state == 0 and np.isclose(place.probability, 1.0) and place.xy[0] == 0.0
 
 
-def test_the_filters_distinct_keys_give_the_places_of_np_unique():
-    from topoloc.localization.metric.sparse_moves import DistinctKeys
-
-    for seed in range(5):
-        args = bank(seed, 12)
-        assert belief_places(**args, distinct=DistinctKeys(3 * 24)) == belief_places(**args)
-
-
 def test_the_cell_of_most_mass_breaks_a_tie_to_the_lowest_cell_in_any_order():
     from topoloc.localization.places import cells_of_most_mass
 

@@ -193,7 +193,7 @@ class CellHMM:
         """The ``k`` most probable places of the forward belief, or of belief ``alpha``
         (:class:`topoloc.localizer.RankedFilter`)."""
         return belief_places(self._owner, self._cells, self.alpha if alpha is None else alpha, self.cell_edge,
-                             self.grid.xy, 1, self.states.num_edges, k, merge_m)[0]
+                             self.grid.xy, 1, self.states.num_edges, k, merge_m, summed=True)[0]  # each cell once
 
     def path(self) -> tuple[NDArray[np.int64], int]:
         """The Viterbi cells of the steps so far, and the number of fresh starts on it."""

@@ -21,7 +21,7 @@ from topoloc.localizer import Place, merge_sorted
 CANDIDATES = 4
 
 
-Distinct = Callable[[NDArray[np.int64]], tuple[NDArray[np.int64], NDArray[np.int64]]]
+Distinct = Callable[[NDArray[np.int64]], tuple[NDArray[np.int64], NDArray[np.integer]]]
 
 
 def cell_sums(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDArray, cells: int,
@@ -54,14 +54,13 @@ def cells_of_most_mass(owner: NDArray[np.int64], cell: NDArray[np.int64], mass: 
 def belief_places(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDArray, cell_edge: NDArray[np.int64],
                   cell_xy: NDArray[np.float64], filters: int, roads: int, k: int, merge_m: float = 0.0,
                   which: NDArray[np.int64] | None = None, shift_m: float = 0.0,
-                  cell_direction: NDArray[np.float64] | None = None,
-                  distinct: Distinct | None = None, summed: bool = False) -> list[list[Place]]:
+                  cell_direction: NDArray[np.float64] | None = None, summed: bool = False) -> list[list[Place]]:
     """Per filter of ``filters`` (or of those in ``which``, in its order), its top ``k`` places, from the belief's
     entries: the filter that ``owner``\\ s each entry, its ``cell`` and ``weight`` (entries of one cell may repeat:
     they add up); ``cell_edge`` and ``cell_xy`` give each cell's road and position on a map of ``roads`` roads.
     A place's position is its road's cell of most mass, moved ``shift_m`` metres along that cell's unit
-    ``cell_direction`` ``(cells, 2)`` (the distance driven since the belief's last step); ``distinct`` as in
-    :func:`cell_sums`. With ``summed`` the entries are already one per (filter, cell) (:func:`cell_sums`)."""
+    ``cell_direction`` ``(cells, 2)`` (the distance driven since the belief's last step). With ``summed`` the
+    entries are already one per (filter, cell) (:func:`cell_sums`), and not summed again."""
     owner, cell = np.asarray(owner, np.int64), np.asarray(cell, np.int64)
     weight = np.asarray(weight)
     key = owner * roads + cell_edge[cell]
@@ -77,7 +76,7 @@ def belief_places(owner: NDArray[np.int64], cell: NDArray[np.int64], weight: NDA
     wanted[(rows[:, None] * roads + top).ravel()] = True
     mine = np.flatnonzero(wanted[key] & (weight > 0))
     pairs = (owner[mine], cell[mine], weight[mine])
-    _, best_cell = cells_of_most_mass(*(pairs if summed else cell_sums(*pairs, len(cell_xy), distinct)), cell_edge,
+    _, best_cell = cells_of_most_mass(*(pairs if summed else cell_sums(*pairs, len(cell_xy))), cell_edge,
                                       filters, roads)
     chosen = best_cell[rows[:, None] * roads + top]
     xy = cell_xy[chosen] if cell_direction is None or shift_m == 0 else cell_xy[chosen] + shift_m * cell_direction[chosen]

@@ -115,7 +115,7 @@ class MetricFilter:
                 filt, cell, mass = cell_sums(owner[split], self.cell[split], self.weight[split], self.num_cells,
                                              self._distinct)
                 self._summed = (np.concatenate([owner[once], filt]), np.concatenate([self.cell[once], cell]),
-                              np.concatenate([self.weight[once].astype(np.float64), mass]))
+                                np.concatenate([self.weight[once].astype(np.float64), mass]))
             else:
                 self._summed = (owner, self.cell, self.weight.astype(np.float64))
             self._summed_of = (self.group, self.cell, self.weight)
