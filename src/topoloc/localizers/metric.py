@@ -8,10 +8,13 @@ from typing import Any
 
 import numpy as np
 
+from topoloc.graph.road_graph import RoadGraph
 from topoloc.localization.calibration import LogitCalibration
 from topoloc.localization.connectivity import DirectedEdges, directed_edges
+from topoloc.localization.metric.cell_grid import lane_offsets
 from topoloc.localization.metric.city_filter import CityFilter, coarse_settings, uses_coarse
-from topoloc.localization.metric.map_model import MetricModel, MetricSettings
+from topoloc.localization.metric.map_model import AddedRoads, MetricModel, MetricSettings
+from topoloc.localization.metric.merged_duals import merge_duals, merged_moves
 from topoloc.localization.metric.odometry_steps import odometry_steps
 from topoloc.localization.metric.restart import RestartingFilter
 from topoloc.localization.roadmap import Observations, RoadLocalizer, RoadMap
@@ -26,6 +29,22 @@ def metric_states(map: RoadMap, settings: MetricSettings) -> DirectedEdges:
     return map.cached(("states", settings.u_turns), lambda: directed_edges(map.graph, settings.u_turns, map.max_skip_m))
 
 
+def metric_map(map: RoadMap, settings: MetricSettings, lane_side: str
+               ) -> tuple[RoadGraph, DirectedEdges, np.ndarray, AddedRoads | None]:
+    """The graph the metric filter runs on, its states, lane offsets and the roads added to the map (None: none):
+    ``map``'s own, or with ``settings.merge_duals_m`` its dual carriageways' merged roads added."""
+    if settings.merge_duals_m > 0:
+        merged = map.cached(("merged duals", settings.merge_duals_m), lambda: merge_duals(map.graph, settings.merge_duals_m))
+        if merged.pairs:
+            states = map.cached(("merged duals", settings.merge_duals_m, settings.u_turns),
+                                lambda: merged_moves(merged, directed_edges(merged.graph, settings.u_turns, map.max_skip_m)))
+            lane = map.cached(("merged duals lane", settings.merge_duals_m, lane_side),
+                              lambda: lane_offsets(merged.graph, lane_side))
+            weight = np.where(np.repeat(merged.added, 2), settings.merge_duals_weight, 1.0)
+            return merged.graph, states, lane, AddedRoads(merged.origin, weight)
+    return map.graph, metric_states(map, settings), map.lane_offsets(lane_side), None
+
+
 @register
 class MetricLocalizer(RoadLocalizer):
     """Positions on directed roads every ``cell_m``, moved by the odometry's distance, weighed by its heading."""
@@ -35,13 +54,13 @@ class MetricLocalizer(RoadLocalizer):
     def setup(self, map: RoadMap, conf: dict[str, Any]) -> None:
         self.set_places(conf)
         settings = MetricSettings.from_conf(conf["localization"]["metric"])
-        states = metric_states(map, settings)
-        lane = map.lane_offsets(self.lane)
-        self.model = model = map.cached(("metric", settings, self.lane), lambda: MetricModel(map.graph, states, settings, lane))
+        graph, states, lane, added = metric_map(map, settings, self.lane)
+        self.model = model = map.cached(("metric", settings, self.lane),
+                                        lambda: MetricModel(graph, states, settings, lane, added))
         coarse = None
         if uses_coarse(settings, model.num_cells):  # a city map: coarse cells while the belief is broad
             wide = coarse_settings(settings)
-            coarse = map.cached(("metric", wide, self.lane), lambda: MetricModel(map.graph, states, wide, lane))
+            coarse = map.cached(("metric", wide, self.lane), lambda: MetricModel(graph, states, wide, lane, added))
         self.coarse_model = coarse
         self.restart = bool(conf["localization"]["metric"]["restart"])
         self.restart_confidence = float(conf["localization"]["metric"]["restart_confidence"])

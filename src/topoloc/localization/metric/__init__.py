@@ -50,6 +50,8 @@ The modules of this package:
 * :mod:`~topoloc.localization.metric.lane_chains`: the chains of a map, road middles and turns through nodes;
 * :mod:`~topoloc.localization.metric.cell_grid`: the chains cut into cells, and how a drive moves between them
   (shared with the token HMM baseline, :mod:`topoloc.localization.hmm`);
+* :mod:`~topoloc.localization.metric.merged_duals`: a second reading of the map, its dual carriageways as one road
+  each (``merge_duals_m``);
 * :mod:`~topoloc.localization.metric.map_model`: the settings and the model of a map, built once: the motion
   model (step transitions) and the measurement model (heading evidence, off the map);
 * :mod:`~topoloc.localization.metric.von_mises`: the heading-offset belief's circular statistics;

@@ -73,7 +73,8 @@ def turn_arc_length(zone_in: NDArray[np.float64], zone_out: NDArray[np.float64],
 
 def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, heading_window_m: float,
                 u_turn_weight: float = 1.0, turn_path: str = "node", wide_zone_m: float = 0.0,
-                u_turn_gap_m: float = 0.0, wide_share: float = 0.5) -> Chains:
+                u_turn_gap_m: float = 0.0, wide_share: float = 0.5,
+                entry_weight: NDArray[np.float64] | None = None) -> Chains:
     """Middles and turn chains of ``graph`` (see the module docstring); a U-turn chain is entered with
     ``u_turn_weight`` times the share of any other turn (each of its two sweeps half of that); ``turn_path``
     (``arc`` or ``node``) sets how long a turn chain is driven. With ``wide_zone_m`` over ``turn_zone_m`` every turn
@@ -81,7 +82,8 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     ends that far before the node, where ``wide_share`` of the vehicles (by default half) take a wide turn and the
     others drive on to the turn zone (an *approach*), take a turn there and drive out of it (an *exit*) to the next
     middle. With ``u_turn_gap_m`` over 0 a U-turn may also cross a median that wide (module docstring), sharing the
-    U-turn's weight with the tight one."""
+    U-turn's weight with the tight one. ``entry_weight`` (per state, at most 1) weighs a turn onto a state of lower
+    weight by the ratio (roads added to the map: :mod:`~topoloc.localization.metric.merged_duals`)."""
     if turn_path not in TURN_PATHS:
         raise ValueError(f"turn_path must be one of {TURN_PATHS}, got {turn_path!r}")
     if not 0.0 < wide_share < 1.0:
@@ -165,6 +167,10 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     approach = np.where(n_wides > 0, n_wides * (1.0 - float(wide_share)) / float(wide_share), 1.0)
     turn_weight = np.where(u_turn, (0.25 if gap > 0 else 0.5) * float(u_turn_weight), 1.0)
     turn_way = np.where(u_turn, float(u_turn_weight), 1.0)
+    wide_weight = np.ones(len(widens))
+    if entry_weight is not None:  # onto a road of lower weight: that much less likely
+        entry = np.minimum(1.0, entry_weight[dst] / entry_weight[src])
+        turn_weight, turn_way, wide_weight = turn_weight * entry, turn_way * entry, entry[widens]
     ones = np.ones(n_edge + n_core)
     shaped = turn_path == "arc" or gap > 0  # some turn chains are not the map's path through the node
     plain_turn = None
@@ -184,8 +190,8 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
                               wide[src[widens]]]),
         second_state=np.concatenate([np.full(n_edge + n_core + n_edge, -1), dst, dst[widens]]),
         turn=np.concatenate([np.zeros(n_edge + n_core + n_edge), turn, turn[widens]]),
-        weight=np.concatenate([ones, approach, turn_weight, np.ones(len(widens))]),
-        way=np.concatenate([ones, approach, turn_way, np.ones(len(widens))]),
+        weight=np.concatenate([ones, approach, turn_weight, wide_weight]),
+        way=np.concatenate([ones, approach, turn_way, wide_weight]),
         stretch=np.concatenate([np.ones(n_edge + n_core + n_edge), on_map / np.maximum(driven, 1e-9)])
         if shaped else None,
         arc_from=np.concatenate([np.zeros(n_edge + n_core + n_edge), arc_from]) if shaped else None,

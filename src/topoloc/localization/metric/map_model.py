@@ -28,6 +28,15 @@ BOOL_SETTINGS = ("bend_spread",)
 
 
 @dataclass(frozen=True)
+class AddedRoads:
+    """Per state of a map with roads added: ``origin``, the map's road it answers as; ``weight``, 1 for the map's own
+    roads, less for an added one (``merge_duals_weight``)."""
+
+    origin: NDArray[np.int64]
+    weight: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
 class MetricSettings:
     """Settings of the metric filter (config ``localization.metric``)."""
 
@@ -59,6 +68,8 @@ class MetricSettings:
     wide_zone_m: float = 20.0
     wide_share: float = 0.1
     u_turn_gap_m: float = 17.5
+    merge_duals_m: float = 25.0
+    merge_duals_weight: float = 0.01
     lateral_offset_m: float = 0.0
     turn_spread: str = "density"
     bend_spread: bool = True
@@ -80,15 +91,21 @@ def _transitions(grid: CellGrid, distance_m: float, split: bool = True) -> sp.cs
 
 class MetricModel:
     """What the filter needs of a map, built once: the cells (with turn chains) and the step transitions;
-    ``lane_offset_m`` places the cells' positions (:func:`~topoloc.localization.metric.cell_grid.lane_offsets`)."""
+    ``lane_offset_m`` places the cells' positions (:func:`~topoloc.localization.metric.cell_grid.lane_offsets`);
+    ``added``: roads added to the map (:mod:`~topoloc.localization.metric.merged_duals`), each state's road to answer
+    as and its weight (of the prior, and of a turn onto it from a road of more weight)."""
 
     def __init__(self, graph: RoadGraph, states: DirectedEdges, settings: MetricSettings,
-                 lane_offset_m: NDArray[np.float64] | None = None) -> None:
+                 lane_offset_m: NDArray[np.float64] | None = None, added: AddedRoads | None = None) -> None:
         self.settings = settings
         chains = lane_chains(graph, states, settings.turn_zone_m, settings.heading_window_m, settings.u_turn_weight,
                              settings.turn_path, settings.wide_zone_m, settings.u_turn_gap_m,
-                             settings.wide_share)
+                             settings.wide_share, None if added is None else added.weight)
         self.grid = grid = CellGrid(graph, states, chains, settings.cell_m, settings.heading_window_m, lane_offset_m)
+        if added is not None:  # roads added to the map answer as the map's road they stand for, and are less likely
+            grid.edge = added.origin[grid.state]
+            prior = grid.prior * added.weight[grid.state]
+            grid.prior = prior / prior.sum()
         n = grid.num_cells
         p = settings.step_jitter
         split = settings.branches == "equal"
