@@ -146,3 +146,21 @@ def test_a_drive_along_a_road_the_map_draws_as_dual_is_placed_on_its_middle(stre
         assert np.isin(states[on_main], list(set(right) | set(left))).all(), (merge, states[on_main])
         error[merge] = [float(np.median(np.hypot(*(at[m] - truth[m]).T))) for m in (on_main, up)]
     assert max(error[25.0]) < 2.0 and error[0.0][0] > 7.0 and error[0.0][1] > 3.0, error
+
+
+@pytest.mark.parametrize("u_turns", ["always", "dead_ends"])
+def test_a_link_that_leads_nowhere_but_back_is_not_entered(u_turns):
+    # the dual carriageway with U-turn stubs: at node 0 (where the south carriageway starts) the only road out is the
+    # carriageway, so its link could only turn back (with u_turns always) or end (dead_ends); at node 3 it meets a stub
+    graph, _, _ = dual_carriageway(400.0, round_ends=True)
+    merged = merge_duals(graph, 25.0)
+    states = merged_moves(merged, directed_edges(merged.graph, u_turns))
+    links = np.flatnonzero(merged.link[states.edge] & states.valid)
+    entered = {int(t) for s in range(states.num_states) for t in states.next_states(s)}
+    to_zero = [int(s) for s in links if states.end[s] == 0]
+    to_three = [int(s) for s in links if states.end[s] == 3]
+    assert len(to_zero) == len(to_three) == 1
+    assert to_zero[0] not in entered and to_three[0] in entered
+    for s in links:  # every link entered has a way on that is not its U-turn
+        if int(s) in entered:
+            assert any(t != s ^ 1 for t in states.next_states(int(s))), s

@@ -41,7 +41,7 @@ def metric_map(map: RoadMap, settings: MetricSettings, lane_side: str
             lane = map.cached(("merged duals lane", settings.merge_duals_m, lane_side),
                               lambda: lane_offsets(merged.graph, lane_side))
             weight = np.where(np.repeat(merged.added, 2), settings.merge_duals_weight, 1.0)
-            return merged.graph, states, lane, AddedRoads(merged.origin, weight)
+            return merged.graph, states, lane, AddedRoads(merged.origin, weight, map.graph.num_edges)
     return map.graph, metric_states(map, settings), map.lane_offsets(lane_side), None
 
 

@@ -167,6 +167,7 @@ class CellGrid:
         self.state = np.where(second, chains.second_state[self.chain], chains.first_state[self.chain])
         self.state_offset = np.where(second, since_node, chains.first_from[self.chain] + on_map)
         self.edge = states.edge[self.state]
+        self.num_roads = states.num_edges  # the roads ``edge`` names (fewer where roads were added to the map)
         self.xy, plain = self._geometry(graph, heading_window_m / 2.0, lane_offset_m)
         self.heading = plain + np.degrees(self._turned_share(since_node, second) * chains.turn[self.chain])
         self.turn_ramp = self._ramp(since_node)

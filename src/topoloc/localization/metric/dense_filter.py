@@ -349,7 +349,7 @@ class MetricFilter:
 
     def edge_marginals(self) -> NDArray[np.float64]:
         """Probability of each undirected road, per filter: ``(filters, roads)``."""
-        roads = self.grid.states.num_edges
+        roads = self.grid.num_roads
         filt, cell, mass = self.summed_belief()
         flat = np.bincount(filt * roads + self.grid.edge[cell], weights=mass, minlength=self.filters * roads)
         return flat.reshape(self.filters, roads)
@@ -364,7 +364,7 @@ class MetricFilter:
         """Per filter: the road of largest probability, its cell of most mass (the scale classes' entries of a cell
         added up, as :meth:`places` adds them), and that probability."""
         edge, confidence = self.roads()
-        roads = self.grid.states.num_edges
+        roads = self.grid.num_roads
         filt, cell, mass = self.summed_belief()
         on = self.grid.edge[cell] == edge[filt]
         most, best = cells_of_most_mass(filt[on], cell[on], mass[on], self.grid.edge, self.filters, roads)
@@ -388,7 +388,7 @@ class MetricFilter:
         (:func:`topoloc.localization.places.belief_places`), each ``shift_m`` metres on along its cell's heading
         (the distance driven since the last step)."""
         filt, cell, mass = self.summed_belief()
-        return belief_places(filt, cell, mass, self.grid.edge, self.grid.xy, self.filters, self.grid.states.num_edges, k,
+        return belief_places(filt, cell, mass, self.grid.edge, self.grid.xy, self.filters, self.grid.num_roads, k,
                              merge_m, which, shift_m, self.model.direction, summed=True)
 
     def top_places(self, k: int, merge_m: float = 0.0, which: int = 0, shift_m: float = 0.0) -> list[Place]:

@@ -162,15 +162,16 @@ def lane_chains(graph: RoadGraph, states: DirectedEdges, turn_zone_m: float, hea
     arc_from = np.where(curved, zin - np.minimum(zin, zout), 0.0)  # straight up to the shorter zone's length
     arc_len = np.where(curved, driven - (zin + zout - 2.0 * np.minimum(zin, zout)), 0.0)
     arc_len = np.where(both_across, on_map, arc_len)
-    n_wides = np.array([len(wides_of.get(int(s), [])) for s in edged], float)
-    # the approach's weight: wide_share of the vehicles at a middle's end take one of its wide turns (weight 1 each)
-    approach = np.where(n_wides > 0, n_wides * (1.0 - float(wide_share)) / float(wide_share), 1.0)
     turn_weight = np.where(u_turn, (0.25 if gap > 0 else 0.5) * float(u_turn_weight), 1.0)
     turn_way = np.where(u_turn, float(u_turn_weight), 1.0)
     wide_weight = np.ones(len(widens))
     if entry_weight is not None:  # onto a road of lower weight: that much less likely
         entry = np.minimum(1.0, entry_weight[dst] / entry_weight[src])
         turn_weight, turn_way, wide_weight = turn_weight * entry, turn_way * entry, entry[widens]
+    wides_weight = np.array([wide_weight[np.asarray(wides_of.get(int(s), []), np.int64) - first_wide].sum()
+                             for s in edged], float)
+    # the approach's weight: wide_share of the vehicles at a middle's end take one of its wide turns (by their weights)
+    approach = np.where(wides_weight > 0, wides_weight * (1.0 - float(wide_share)) / float(wide_share), 1.0)
     ones = np.ones(n_edge + n_core)
     shaped = turn_path == "arc" or gap > 0  # some turn chains are not the map's path through the node
     plain_turn = None

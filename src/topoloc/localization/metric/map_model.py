@@ -30,10 +30,11 @@ BOOL_SETTINGS = ("bend_spread",)
 @dataclass(frozen=True)
 class AddedRoads:
     """Per state of a map with roads added: ``origin``, the map's road it answers as; ``weight``, 1 for the map's own
-    roads, less for an added one (``merge_duals_weight``)."""
+    roads, less for an added one (``merge_duals_weight``); ``roads``: how many roads the map has."""
 
     origin: NDArray[np.int64]
     weight: NDArray[np.float64]
+    roads: int
 
 
 @dataclass(frozen=True)
@@ -103,7 +104,7 @@ class MetricModel:
                              settings.wide_share, None if added is None else added.weight)
         self.grid = grid = CellGrid(graph, states, chains, settings.cell_m, settings.heading_window_m, lane_offset_m)
         if added is not None:  # roads added to the map answer as the map's road they stand for, and are less likely
-            grid.edge = added.origin[grid.state]
+            grid.edge, grid.num_roads = added.origin[grid.state], added.roads
             prior = grid.prior * added.weight[grid.state]
             grid.prior = prior / prior.sum()
         n = grid.num_cells

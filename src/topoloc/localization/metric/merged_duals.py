@@ -163,12 +163,16 @@ def merge_duals(graph: RoadGraph, max_gap_m: float) -> MergedDuals:
 def merged_moves(merged: MergedDuals, states: DirectedEdges) -> DirectedEdges:
     """``states`` (of ``merged.graph``) without the moves between a link and a road of a dual pair or another link:
     from the middle road a link leads to the side roads at the pair's node, not across the median (two links) nor
-    back onto a carriageway (which would turn back without a U-turn's weight), and a carriageway leads to no link."""
+    back onto a carriageway (which would turn back without a U-turn's weight), and a carriageway leads to no link.
+    A link that leads nowhere then but back (a pair's node without side roads) is not entered. Only the one-hop moves
+    (``next_ptr``, ``next_idx``, which the metric filter's chains follow) change, not the token ``successors``."""
     paired = np.zeros(merged.graph.num_edges, bool)
     paired[[e for pair in merged.pairs for e in pair]] = True
     link, pair = merged.link[states.edge], paired[states.edge]
     src = np.repeat(np.arange(states.num_states), np.diff(states.next_ptr))
     dst = states.next_idx
     barred = (link[src] & (link[dst] | pair[dst]) & (dst != (src ^ 1))) | (pair[src] & link[dst])
+    onward = np.bincount(src[~barred & (dst != (src ^ 1))], minlength=states.num_states) > 0
+    barred |= link[dst] & ~onward[dst]  # into a link with no way on but its U-turn
     counts = np.bincount(src[~barred], minlength=states.num_states)
     return replace(states, next_ptr=np.concatenate([[0], np.cumsum(counts)]), next_idx=dst[~barred])
