@@ -105,9 +105,9 @@ def dual_pairs(graph: RoadGraph, max_gap_m: float) -> list[tuple[int, int, NDArr
                 r = row[int(start[b])]
                 if b == a or {p, q} & {r, t}:
                     continue
-                apart = float(np.hypot(*(xy[p] - xy[t])) + np.hypot(*(xy[q] - xy[r])))
-                if np.hypot(*(xy[q] - xy[r])) <= max_gap_m:
-                    candidates.append((apart, int(a), int(b)))
+                far_end = float(np.hypot(*(xy[q] - xy[r])))
+                if far_end <= max_gap_m:
+                    candidates.append((float(np.hypot(*(xy[p] - xy[t]))) + far_end, int(a), int(b)))
     pairs, used = [], set()
     for _, a, b in sorted(candidates):
         if a in used or b in used:
@@ -147,12 +147,10 @@ def merge_duals(graph: RoadGraph, max_gap_m: float) -> MergedDuals:
 
     for a, b, middle in pairs:
         p, q, r, t = int(start[a]), int(end[a]), int(start[b]), int(end[b])
-        u, v = middle_node(p, t, a, b), middle_node(q, r, a, b)
-        line = middle.copy()
-        line[0], line[-1] = nodes.loc[u, ["x", "y"]].to_numpy(float), nodes.loc[v, ["x", "y"]].to_numpy(float)
+        u, v = middle_node(p, t, a, b), middle_node(q, r, a, b)  # the middle line's ends, as computed there
         records.append({"u": u, "v": v, "oneway": 0, "highway": records[a]["highway"],
                         "name": "merged dual carriageway", "osm_way_ids": ""})
-        geometry.append(line)
+        geometry.append(middle)
         origin.append([a, b])  # u -> v runs as a, v -> u as b
     merged = build_graph(nodes, records, geometry, graph)
     added = np.arange(merged.num_edges) >= graph.num_edges
